@@ -1,1 +1,50 @@
-fn main() {}
+//! `kumi`: the front door to every kumi tool.
+
+mod bench;
+mod sim;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "kumi", version, about = "Hierarchical controllers for modular robots: models, simulation, training, ROS 2 nodes")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print the assembled URDF of a morphology (a shipped name or a path to a TOML file).
+    Urdf {
+        /// `minimal`, `dragon`, `tricycle`, `arm`, or a path to a morphology file.
+        morphology: String,
+    },
+    /// Simulate a morphology for a while and report what happened.
+    Sim(sim::SimArgs),
+    /// Benchmarks.
+    Bench {
+        #[command(subcommand)]
+        what: bench::BenchCommand,
+    },
+}
+
+fn main() -> Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Urdf { morphology } => {
+            let model = sim::load_model(&morphology)?;
+            print!("{}", model.urdf_xml());
+            Ok(())
+        }
+        Command::Sim(args) => sim::run(args),
+        Command::Bench { what } => bench::run(what),
+    }
+}

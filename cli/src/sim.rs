@@ -1,0 +1,195 @@
+//! `kumi sim`: simulate a morphology and report stability, motion and contacts.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel, Role};
+use kumi_sim::{Layout, SimConfig, World};
+use nalgebra::Vector3;
+use serde::Serialize;
+
+/// Loads and assembles a morphology by shipped name or file path.
+pub fn load_model(morphology: &str) -> Result<Arc<RobotModel>> {
+    let library = ModuleLibrary::shipped();
+    let morphology = load_morphology(morphology, &library)?;
+    Ok(Arc::new(assemble(&morphology, &library)))
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum LayoutArg {
+    SingleMultibody,
+    PerLimb,
+    PerModule,
+}
+
+impl From<LayoutArg> for Layout {
+    fn from(l: LayoutArg) -> Self {
+        match l {
+            LayoutArg::SingleMultibody => Layout::SingleMultibody,
+            LayoutArg::PerLimb => Layout::PerLimb,
+            LayoutArg::PerModule => Layout::PerModule,
+        }
+    }
+}
+
+/// Physics settings shared by `sim` and `bench`; defaults are [`SimConfig::default`].
+#[derive(Args, Clone, Debug)]
+pub struct PhysicsArgs {
+    /// Articulation layout (default: the library default).
+    #[arg(long, value_enum)]
+    pub layout: Option<LayoutArg>,
+    /// Physics steps per control step.
+    #[arg(long)]
+    pub substeps: Option<u32>,
+    /// Solver iterations per physics step.
+    #[arg(long)]
+    pub iterations: Option<u32>,
+    /// Velocity-only stabilisation passes per physics step.
+    #[arg(long)]
+    pub stabilization: Option<u32>,
+}
+
+impl PhysicsArgs {
+    pub fn config(&self) -> SimConfig {
+        let mut c = SimConfig::default();
+        if let Some(l) = self.layout {
+            c.layout = l.into();
+        }
+        if let Some(s) = self.substeps {
+            c.substeps = s;
+        }
+        if let Some(i) = self.iterations {
+            c.solver_iterations = i;
+        }
+        if let Some(s) = self.stabilization {
+            c.stabilization_iterations = s;
+        }
+        c
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct SimArgs {
+    /// `minimal`, `dragon`, `tricycle`, `arm`, or a path to a morphology file.
+    pub morphology: String,
+    /// Simulated duration [s].
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Velocity for every wheel module [rad/s], signed so that each drives the base along +x.
+    #[arg(long, default_value_t = 0.0)]
+    pub wheel_velocity: f64,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub physics: PhysicsArgs,
+}
+
+#[derive(Serialize)]
+struct SimReport {
+    morphology: String,
+    config: String,
+    seconds: f64,
+    control_steps: u64,
+    wall_s: f64,
+    realtime_factor: f64,
+    base_start_m: [f64; 3],
+    base_end_m: [f64; 3],
+    base_travel_xy_m: f64,
+    max_tilt_rad: f64,
+    lowest_point_m: f64,
+    max_mount_error_m: f64,
+    max_mount_error_rad: f64,
+    max_joint_speed_rad_s: f64,
+    finite: bool,
+    ground_contacts_at_end: Vec<String>,
+}
+
+/// The sign that makes a wheel module drive the base along its +x: the module's own forward
+/// axis (body x) projected on the base x axis at the start.
+pub fn wheel_directions(world: &World) -> Vec<(String, f64)> {
+    let base = world.base_pose();
+    let base_x = base.rotation * Vector3::x();
+    world
+        .model()
+        .modules_with_role(Role::Wheel)
+        .map(|m| {
+            let body = world.link_pose(&m.root_link).expect("wheel body exists");
+            let forward = body.rotation * Vector3::x();
+            (m.name.clone(), forward.dot(&base_x).signum())
+        })
+        .collect()
+}
+
+/// Tilt of the base [rad]: the angle between its z axis and the world's.
+pub fn tilt(world: &World) -> f64 {
+    let z = world.base_pose().rotation * Vector3::z();
+    z.z.clamp(-1.0, 1.0).acos()
+}
+
+pub fn run(args: SimArgs) -> Result<()> {
+    if !(args.seconds.is_finite() && args.seconds > 0.0) {
+        bail!("--seconds must be a positive number of seconds, got {}", args.seconds);
+    }
+    let model = load_model(&args.morphology)?;
+    let config = args.physics.config();
+    let mut world = World::new(model.clone(), config).context("building the world")?;
+    for (module, sign) in wheel_directions(&world) {
+        world.set_wheel_velocity(&module, sign * args.wheel_velocity)?;
+    }
+    let start = world.base_pose().translation.vector;
+    let steps = (args.seconds * config.control_hz).round() as u64;
+    let (mut max_tilt, mut lowest, mut mount_m, mut mount_rad, mut max_speed) =
+        (0.0_f64, f64::INFINITY, 0.0_f64, 0.0_f64, 0.0_f64);
+    let mut finite = true;
+    let wall = Instant::now();
+    for _ in 0..steps {
+        world.step();
+        max_tilt = max_tilt.max(tilt(&world));
+        lowest = lowest.min(world.lowest_collider_z());
+        for (_, m, r) in world.mount_errors() {
+            mount_m = mount_m.max(m);
+            mount_rad = mount_rad.max(r);
+        }
+        let v = world.joint_velocities();
+        finite &= v.iter().all(|x| x.is_finite()) && world.base_pose().translation.vector.iter().all(|x| x.is_finite());
+        max_speed = v.iter().fold(max_speed, |a, x| a.max(x.abs()));
+    }
+    let wall_s = wall.elapsed().as_secs_f64();
+    let end = world.base_pose().translation.vector;
+    let report = SimReport {
+        morphology: model.name.clone(),
+        config: config.label(),
+        seconds: args.seconds,
+        control_steps: steps,
+        wall_s,
+        realtime_factor: args.seconds / wall_s,
+        base_start_m: start.into(),
+        base_end_m: end.into(),
+        base_travel_xy_m: (end - start).xy().norm(),
+        max_tilt_rad: max_tilt,
+        lowest_point_m: lowest,
+        max_mount_error_m: mount_m,
+        max_mount_error_rad: mount_rad,
+        max_joint_speed_rad_s: max_speed,
+        finite,
+        ground_contacts_at_end: world.ground_contacts(),
+    };
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!("{} for {} s simulated ({} control steps at {} Hz, physics {})", report.morphology, report.seconds, steps, config.control_hz, report.config);
+        println!("  wall time           {:.2} s ({:.1}x real time)", wall_s, report.realtime_factor);
+        println!("  base start -> end   [{:.3}, {:.3}, {:.3}] -> [{:.3}, {:.3}, {:.3}] m", start.x, start.y, start.z, end.x, end.y, end.z);
+        println!("  base travel (xy)    {:.4} m", report.base_travel_xy_m);
+        println!("  max base tilt       {:.4} rad ({:.2} deg)", max_tilt, max_tilt.to_degrees());
+        println!("  lowest point        {:.4} m (negative: below the ground)", lowest);
+        println!("  max mount error     {:.5} m, {:.3} deg", mount_m, mount_rad.to_degrees());
+        println!("  max joint speed     {:.3} rad/s", max_speed);
+        println!("  all values finite   {}", finite);
+        println!("  touching the ground {}", report.ground_contacts_at_end.join(", "));
+    }
+    Ok(())
+}

@@ -1,0 +1,111 @@
+//! The actuator law applied before every physics step: pure functions, so the same limits hold
+//! in training, evaluation and the bridge.
+
+use kumi_model::{Actuator, ActuatorMode};
+
+/// The command a driven joint is following.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoState {
+    /// The latest command: a position [rad] or a velocity [rad/s] target, already clamped.
+    pub command: f64,
+    /// For position servos, the set-point the PD law tracks now [rad]: it slews toward
+    /// `command` at no more than the velocity limit. For velocity servos, the integrated
+    /// wheel angle it holds [rad].
+    pub setpoint: f64,
+}
+
+impl ServoState {
+    /// A servo at rest holding `q`: position servos commanded to `q`, velocity servos to stop.
+    pub fn holding(mode: ActuatorMode, q: f64) -> Self {
+        Self {
+            command: match mode {
+                ActuatorMode::Position => q,
+                ActuatorMode::Velocity => 0.0,
+            },
+            setpoint: q,
+        }
+    }
+}
+
+
+/// Clamps a raw command to the actuator's limits; `None` for a non-finite command.
+pub fn clamp_command(actuator: &Actuator, command: f64) -> Option<f64> {
+    if !command.is_finite() {
+        return None;
+    }
+    Some(match actuator.mode {
+        ActuatorMode::Position => actuator.clamp_position(command),
+        ActuatorMode::Velocity => actuator.clamp_velocity(command),
+    })
+}
+
+/// Moves a position set-point toward the command by at most `velocity_limit * dt` [rad].
+pub fn slew(setpoint: f64, command: f64, velocity_limit: f64, dt: f64) -> f64 {
+    let max_step = velocity_limit * dt;
+    setpoint + (command - setpoint).clamp(-max_step, max_step)
+}
+
+/// Integrates a velocity command [rad/s] into a wheel's position set-point [rad], keeping it
+/// within `max_lead` [rad] of the measured position `q` (anti-windup: a blocked wheel pushes
+/// with at most its effort limit, and does not lurch forward when freed).
+pub fn integrate_velocity_setpoint(setpoint: f64, command: f64, q: f64, max_lead: f64, dt: f64) -> f64 {
+    (setpoint + command * dt).clamp(q - max_lead, q + max_lead)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn arm_joint() -> Actuator {
+        Actuator {
+            joint: "j".into(),
+            mode: ActuatorMode::Position,
+            stiffness: 800.0,
+            damping: 60.0,
+            armature: 0.1,
+            joint_damping: 2.0,
+            joint_friction: 0.0,
+            effort_limit: 136.0,
+            velocity_limit: 1.5,
+            lower: -2.0,
+            upper: 2.0,
+        }
+    }
+
+    #[test]
+    fn slew_is_rate_limited_and_lands_exactly() {
+        // 1.5 rad/s over 1/120 s is 0.0125 rad per step.
+        assert_eq!(slew(0.0, 1.0, 1.5, 1.0 / 120.0), 0.0125);
+        assert_eq!(slew(0.0, -1.0, 1.5, 1.0 / 120.0), -0.0125);
+        assert_eq!(slew(0.995, 1.0, 1.5, 1.0 / 120.0), 1.0);
+    }
+
+    #[test]
+    fn velocity_setpoint_integrates_and_never_winds_up() {
+        // 2 rad/s over 0.01 s advances 0.02 rad.
+        assert!((integrate_velocity_setpoint(1.0, 2.0, 1.0, 0.5, 0.01) - 1.02).abs() < 1e-12);
+        // A blocked wheel (q stuck at 0) leads by at most max_lead.
+        let mut sp = 0.0;
+        for _ in 0..1000 {
+            sp = integrate_velocity_setpoint(sp, 5.0, 0.0, 0.45, 0.01);
+        }
+        assert_eq!(sp, 0.45);
+    }
+
+    #[test]
+    fn commands_are_clamped_and_non_finite_rejected() {
+        let a = arm_joint();
+        assert_eq!(clamp_command(&a, 3.0), Some(2.0));
+        assert_eq!(clamp_command(&a, -3.0), Some(-2.0));
+        assert_eq!(clamp_command(&a, f64::NAN), None);
+        assert_eq!(clamp_command(&a, f64::INFINITY), None);
+        let wheel = Actuator {
+            mode: ActuatorMode::Velocity,
+            velocity_limit: 5.0,
+            lower: f64::NEG_INFINITY,
+            upper: f64::INFINITY,
+            ..a
+        };
+        assert_eq!(clamp_command(&wheel, 9.0), Some(5.0));
+    }
+}

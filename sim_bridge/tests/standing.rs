@@ -1,0 +1,32 @@
+//! Every shipped morphology stands on flat ground at its home pose.
+
+mod common;
+
+use common::{tilt, world};
+
+/// 60 s of simulated time at home: tilt stays under 0.1 rad, nothing sinks through the ground
+/// (deepest penetration under 5 mm), every value stays finite.
+#[test]
+fn every_morphology_stands_60_s_at_home() {
+    for name in ["minimal", "dragon", "tricycle"] {
+        let mut w = world(name);
+        let steps = (60.0 * w.config().control_hz) as usize;
+        let (mut max_tilt, mut lowest) = (0.0_f64, f64::INFINITY);
+        for _ in 0..steps {
+            w.step();
+            max_tilt = max_tilt.max(tilt(&w));
+            lowest = lowest.min(w.lowest_collider_z());
+            assert!(
+                w.joint_velocities().iter().all(|v| v.is_finite()),
+                "{name}: non-finite joint velocity at t = {}",
+                w.time()
+            );
+        }
+        assert!(max_tilt < 0.1, "{name}: base tilted {max_tilt} rad");
+        assert!(lowest > -0.005, "{name}: sank {lowest} m into the ground");
+        // It is standing on its wheels (and Minimal's skids), nothing else.
+        for link in w.ground_contacts() {
+            assert!(link.contains("wheel"), "{name}: {link} touches the ground");
+        }
+    }
+}
