@@ -23,7 +23,11 @@ pub enum BenchCommand {
 #[derive(Args, Debug)]
 pub struct BenchSimArgs {
     /// Morphologies to measure (shipped names or files).
-    #[arg(long, value_delimiter = ',', default_value = "arm,minimal,dragon,tricycle")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "arm,minimal,dragon,tricycle"
+    )]
     pub models: Vec<String>,
     /// Simulated seconds per speed measurement.
     #[arg(long, default_value_t = 20.0)]
@@ -73,10 +77,14 @@ fn drive(world: &mut World, home: &[f64], step: u64) {
         let range = index..index + m.actuators.len();
         index = range.end;
         if m.actuators.iter().any(|a| a.mode == ActuatorMode::Velocity) {
-            world.set_wheel_velocity(&m.name, 1.0).expect("wheel module");
+            world
+                .set_wheel_velocity(&m.name, 1.0)
+                .expect("wheel module");
         } else if !m.actuators.is_empty() {
             let targets: Vec<f64> = home[range].iter().map(|q| q + offset).collect();
-            world.set_position_targets(&m.name, &targets).expect("arm module");
+            world
+                .set_position_targets(&m.name, &targets)
+                .expect("arm module");
         }
     }
 }
@@ -119,7 +127,12 @@ fn stability(model: &Arc<RobotModel>, config: SimConfig) -> Result<Stability> {
     })
 }
 
-fn bench_model(name: &str, args: &BenchSimArgs, config: SimConfig, worlds: usize) -> Result<Vec<Record>> {
+fn bench_model(
+    name: &str,
+    args: &BenchSimArgs,
+    config: SimConfig,
+    worlds: usize,
+) -> Result<Vec<Record>> {
     let model = load_model(name)?;
     let steps = (args.seconds * config.control_hz).round().max(1.0) as u64;
 
@@ -147,7 +160,9 @@ fn bench_model(name: &str, args: &BenchSimArgs, config: SimConfig, worlds: usize
             .collect(),
     );
     let single = steps_per_second(&model, config, steps)?;
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(worlds).build()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(worlds)
+        .build()?;
     let start = Instant::now();
     pool.install(|| {
         (0..worlds)
@@ -207,7 +222,16 @@ pub fn run(what: BenchCommand) -> Result<()> {
         };
         println!(
             "| {} | {} | {} | {} | {:.0} | {:.2} | {:.1} | {} | {} | {} |",
-            r.model, r.config, r.threads, r.worlds, r.control_steps_per_s, r.build_ms, r.reset_us, drift, tilt, mount
+            r.model,
+            r.config,
+            r.threads,
+            r.worlds,
+            r.control_steps_per_s,
+            r.build_ms,
+            r.reset_us,
+            drift,
+            tilt,
+            mount
         );
     }
     Ok(())

@@ -3,11 +3,17 @@
 mod bench;
 mod sim;
 
+use std::process::ExitCode;
+
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "kumi", version, about = "Hierarchical controllers for modular robots: models, simulation, training, ROS 2 nodes")]
+#[command(
+    name = "kumi",
+    version,
+    about = "Hierarchical controllers for modular robots: models, simulation, training, ROS 2 nodes"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -29,7 +35,18 @@ enum Command {
     },
 }
 
-fn main() -> Result<()> {
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // `{:#}` prints the whole chain of causes on one line, without a backtrace.
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()

@@ -131,7 +131,10 @@ pub fn tilt(world: &World) -> f64 {
 
 pub fn run(args: SimArgs) -> Result<()> {
     if !(args.seconds.is_finite() && args.seconds > 0.0) {
-        bail!("--seconds must be a positive number of seconds, got {}", args.seconds);
+        bail!(
+            "--seconds must be a positive number of seconds, got {}",
+            args.seconds
+        );
     }
     let model = load_model(&args.morphology)?;
     let config = args.physics.config();
@@ -154,7 +157,13 @@ pub fn run(args: SimArgs) -> Result<()> {
             mount_rad = mount_rad.max(r);
         }
         let v = world.joint_velocities();
-        finite &= v.iter().all(|x| x.is_finite()) && world.base_pose().translation.vector.iter().all(|x| x.is_finite());
+        finite &= v.iter().all(|x| x.is_finite())
+            && world
+                .base_pose()
+                .translation
+                .vector
+                .iter()
+                .all(|x| x.is_finite());
         max_speed = v.iter().fold(max_speed, |a, x| a.max(x.abs()));
     }
     let wall_s = wall.elapsed().as_secs_f64();
@@ -180,16 +189,39 @@ pub fn run(args: SimArgs) -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
-        println!("{} for {} s simulated ({} control steps at {} Hz, physics {})", report.morphology, report.seconds, steps, config.control_hz, report.config);
-        println!("  wall time           {:.2} s ({:.1}x real time)", wall_s, report.realtime_factor);
-        println!("  base start -> end   [{:.3}, {:.3}, {:.3}] -> [{:.3}, {:.3}, {:.3}] m", start.x, start.y, start.z, end.x, end.y, end.z);
+        println!(
+            "{} for {} s simulated ({} control steps at {} Hz, physics {})",
+            report.morphology, report.seconds, steps, config.control_hz, report.config
+        );
+        println!(
+            "  wall time           {:.2} s ({:.1}x real time)",
+            wall_s, report.realtime_factor
+        );
+        println!(
+            "  base start -> end   [{:.3}, {:.3}, {:.3}] -> [{:.3}, {:.3}, {:.3}] m",
+            start.x, start.y, start.z, end.x, end.y, end.z
+        );
         println!("  base travel (xy)    {:.4} m", report.base_travel_xy_m);
-        println!("  max base tilt       {:.4} rad ({:.2} deg)", max_tilt, max_tilt.to_degrees());
-        println!("  lowest point        {:.4} m (negative: below the ground)", lowest);
-        println!("  max mount error     {:.5} m, {:.3} deg", mount_m, mount_rad.to_degrees());
+        println!(
+            "  max base tilt       {:.4} rad ({:.2} deg)",
+            max_tilt,
+            max_tilt.to_degrees()
+        );
+        println!(
+            "  lowest point        {:.4} m (negative: below the ground)",
+            lowest
+        );
+        println!(
+            "  max mount error     {:.5} m, {:.3} deg",
+            mount_m,
+            mount_rad.to_degrees()
+        );
         println!("  max joint speed     {:.3} rad/s", max_speed);
         println!("  all values finite   {}", finite);
-        println!("  touching the ground {}", report.ground_contacts_at_end.join(", "));
+        println!(
+            "  touching the ground {}",
+            report.ground_contacts_at_end.join(", ")
+        );
     }
     Ok(())
 }

@@ -27,7 +27,6 @@ impl ServoState {
     }
 }
 
-
 /// Clamps a raw command to the actuator's limits; `None` for a non-finite command.
 pub fn clamp_command(actuator: &Actuator, command: f64) -> Option<f64> {
     if !command.is_finite() {
@@ -48,7 +47,13 @@ pub fn slew(setpoint: f64, command: f64, velocity_limit: f64, dt: f64) -> f64 {
 /// Integrates a velocity command [rad/s] into a wheel's position set-point [rad], keeping it
 /// within `max_lead` [rad] of the measured position `q` (anti-windup: a blocked wheel pushes
 /// with at most its effort limit, and does not lurch forward when freed).
-pub fn integrate_velocity_setpoint(setpoint: f64, command: f64, q: f64, max_lead: f64, dt: f64) -> f64 {
+pub fn integrate_velocity_setpoint(
+    setpoint: f64,
+    command: f64,
+    q: f64,
+    max_lead: f64,
+    dt: f64,
+) -> f64 {
     (setpoint + command * dt).clamp(q - max_lead, q + max_lead)
 }
 

@@ -6,14 +6,20 @@ use kumi_model::kinematics::TreeError;
 pub enum SimError {
     #[error("robot `{robot}`: {source}")]
     Tree { robot: String, source: TreeError },
-    #[error("robot `{robot}`: actuated joint `{joint}` is not a multibody joint in the rapier model")]
+    #[error(
+        "robot `{robot}`: actuated joint `{joint}` is not a multibody joint in the rapier model"
+    )]
     ActuatorNotArticulated { robot: String, joint: String },
     #[error("no module named `{0}`")]
     UnknownModule(String),
     #[error("no link named `{0}`")]
     UnknownLink(String),
     #[error("module `{module}` expects {expected} values, got {got}")]
-    LengthMismatch { module: String, expected: usize, got: usize },
+    LengthMismatch {
+        module: String,
+        expected: usize,
+        got: usize,
+    },
     #[error("module `{module}`: non-finite command {value}")]
     NonFinite { module: String, value: f64 },
     #[error("module `{module}` has no {what} joints")]

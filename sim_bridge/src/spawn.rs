@@ -69,7 +69,12 @@ pub(crate) fn spawn(
     let has_children: Vec<bool> = model
         .modules
         .iter()
-        .map(|m| model.modules.iter().any(|c| c.parent.as_deref() == Some(m.name.as_str())))
+        .map(|m| {
+            model
+                .modules
+                .iter()
+                .any(|c| c.parent.as_deref() == Some(m.name.as_str()))
+        })
         .collect();
 
     let mut links: Vec<Option<LinkBody>> = vec![None; tree.links().len()];
@@ -202,11 +207,13 @@ pub(crate) fn spawn(
         }
     }
 
-    let ground_body = physics.bodies.insert(RigidBodyBuilder::fixed().translation(Vector::new(
-        0.0,
-        0.0,
-        -GROUND_HALF_EXTENTS[2],
-    )));
+    let ground_body = physics
+        .bodies
+        .insert(RigidBodyBuilder::fixed().translation(Vector::new(
+            0.0,
+            0.0,
+            -GROUND_HALF_EXTENTS[2],
+        )));
     let ground = physics.colliders.insert_with_parent(
         ColliderBuilder::cuboid(
             GROUND_HALF_EXTENTS[0],

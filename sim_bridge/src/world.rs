@@ -94,8 +94,9 @@ impl World {
         physics.gravity = Vector::new(0.0, 0.0, -9.81);
         physics.integration_parameters.dt = config.dt() as f32;
         physics.integration_parameters.num_solver_iterations = config.solver_iterations as usize;
-        physics.integration_parameters.num_internal_stabilization_iterations =
-            config.stabilization_iterations as usize;
+        physics
+            .integration_parameters
+            .num_internal_stabilization_iterations = config.stabilization_iterations as usize;
         let spawned = spawn(&model, &tree, &config, &mut physics)?;
 
         let actuators: Vec<_> = model.actuators().cloned().collect();
@@ -133,7 +134,13 @@ impl World {
                 .collect(),
             max_leads: actuators
                 .iter()
-                .map(|a| if a.stiffness > 0.0 { a.effort_limit / a.stiffness } else { 0.0 })
+                .map(|a| {
+                    if a.stiffness > 0.0 {
+                        a.effort_limit / a.stiffness
+                    } else {
+                        0.0
+                    }
+                })
                 .collect(),
             model,
             config,
@@ -206,7 +213,13 @@ impl World {
 
     /// A configuration with the base at (`x`, `y`) [m] and heading `yaw` [rad], lifted so that
     /// the lowest collider just touches the ground.
-    pub fn standing_state(&self, x: f64, y: f64, yaw: f64, joint_positions: Vec<f64>) -> RobotState {
+    pub fn standing_state(
+        &self,
+        x: f64,
+        y: f64,
+        yaw: f64,
+        joint_positions: Vec<f64>,
+    ) -> RobotState {
         let level = Isometry3::from_parts(
             Translation3::new(x, y, 0.0),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
@@ -221,7 +234,9 @@ impl World {
 
     /// The lowest point [m] of any robot collider with the robot placed at `base_pose_w`.
     fn lowest_point(&self, base_pose_w: &Isometry3<f64>, joint_positions: &[f64]) -> f64 {
-        let poses = self.tree.forward(base_pose_w, &self.tree_positions(joint_positions));
+        let poses = self
+            .tree
+            .forward(base_pose_w, &self.tree_positions(joint_positions));
         let mut lowest = f64::INFINITY;
         for (&handle, &link_index) in &self.collider_links {
             let collider = &self.physics.colliders[handle];
@@ -262,7 +277,9 @@ impl World {
         } else {
             state.base_pose_w
         };
-        let poses = self.tree.forward(&base, &self.tree_positions(&state.joint_positions));
+        let poses = self
+            .tree
+            .forward(&base, &self.tree_positions(&state.joint_positions));
         for (link, pose) in self.links.iter().zip(&poses) {
             if link.offset == Isometry3::identity() {
                 place_body(&mut self.physics, link.body, pose);
@@ -377,10 +394,12 @@ impl World {
         let actuators: Vec<_> = self.model.actuators().collect();
         let mut clamped = Vec::with_capacity(values.len());
         for (&i, &v) in indices.iter().zip(values) {
-            clamped.push(clamp_command(actuators[i], v).ok_or_else(|| SimError::NonFinite {
-                module: module.to_string(),
-                value: v,
-            })?);
+            clamped.push(
+                clamp_command(actuators[i], v).ok_or_else(|| SimError::NonFinite {
+                    module: module.to_string(),
+                    value: v,
+                })?,
+            );
         }
         for (&i, v) in indices.iter().zip(clamped) {
             self.servos[i].command = v;
@@ -565,7 +584,12 @@ impl World {
             .links()
             .iter()
             .zip(&self.links)
-            .map(|(name, link)| (name.clone(), to_na_isometry(self.physics.bodies[link.body].position()) * link.offset))
+            .map(|(name, link)| {
+                (
+                    name.clone(),
+                    to_na_isometry(self.physics.bodies[link.body].position()) * link.offset,
+                )
+            })
             .collect()
     }
 }

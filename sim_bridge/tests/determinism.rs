@@ -41,7 +41,10 @@ fn reset_in_place_reproduces_a_fresh_world_bit_for_bit() {
         w.reset(&home);
         assert_eq!(w.time(), 0.0);
         let replay = trajectory(&mut w, 3, 60);
-        assert_eq!(fresh, replay, "{name}: reset world diverged from a fresh one");
+        assert_eq!(
+            fresh, replay,
+            "{name}: reset world diverged from a fresh one"
+        );
     }
 }
 
@@ -56,7 +59,10 @@ fn reset_to_another_configuration_matches_a_fresh_world_reset_there() {
     a.reset(&state);
     b.reset(&state);
     let base = a.base_pose().translation.vector;
-    assert!((base.x - 0.4).abs() < 1e-6 && (base.y + 0.2).abs() < 1e-6, "{base}");
+    assert!(
+        (base.x - 0.4).abs() < 1e-6 && (base.y + 0.2).abs() < 1e-6,
+        "{base}"
+    );
     assert!((a.joint_positions()[1] - state.joint_positions[1]).abs() < 1e-6);
     assert_eq!(trajectory(&mut a, 11, 45), trajectory(&mut b, 11, 45));
 }

@@ -52,11 +52,21 @@ fn wheel_velocity_is_clamped_and_nan_rejected() {
     let mut w = world("dragon");
     w.set_wheel_velocity("front_wheel", 100.0).unwrap();
     let range = w.module_range("front_wheel").unwrap();
-    assert_eq!(w.commands()[range.start], 5.0, "wheel velocity limit is 5 rad/s");
+    assert_eq!(
+        w.commands()[range.start],
+        5.0,
+        "wheel velocity limit is 5 rad/s"
+    );
     let before = w.commands();
     assert!(w.set_wheel_velocity("front_wheel", f64::NAN).is_err());
     assert_eq!(w.commands(), before, "a rejected command changes nothing");
     assert!(w.set_wheel_velocity("no_such_module", 1.0).is_err());
-    assert!(w.set_wheel_velocity("arm0", 1.0).is_err(), "arms have no wheels");
-    assert!(w.set_position_targets("arm0", &[0.0; 6]).is_err(), "7 values expected");
+    assert!(
+        w.set_wheel_velocity("arm0", 1.0).is_err(),
+        "arms have no wheels"
+    );
+    assert!(
+        w.set_position_targets("arm0", &[0.0; 6]).is_err(),
+        "7 values expected"
+    );
 }

@@ -15,7 +15,10 @@ const MAX_BASE_SPEED: f64 = 10.0;
 
 #[test]
 fn random_targets_for_60_s_stay_finite_and_bounded() {
-    for (seed, name) in ["arm", "minimal", "dragon", "tricycle"].into_iter().enumerate() {
+    for (seed, name) in ["arm", "minimal", "dragon", "tricycle"]
+        .into_iter()
+        .enumerate()
+    {
         let mut w = world(name);
         let mut rng = Rng::new(seed as u64 + 1);
         let steps = (60.0 * w.config().control_hz) as usize;

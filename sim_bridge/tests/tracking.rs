@@ -14,7 +14,15 @@ fn a_joint_step_settles_within_1_cm_of_forward_kinematics() {
     let tree = KinematicTree::new(&w.model().urdf).unwrap();
     let names: Vec<String> = w.actuator_names().iter().map(|s| s.to_string()).collect();
     // One step per joint, each loading it against gravity where it can (pitch joints).
-    let steps = [(0, 1.0), (1, 0.6), (2, -1.0), (3, 1.2), (4, 0.8), (5, -0.9), (6, 1.5)];
+    let steps = [
+        (0, 1.0),
+        (1, 0.6),
+        (2, -1.0),
+        (3, 1.2),
+        (4, 0.8),
+        (5, -0.9),
+        (6, 1.5),
+    ];
     for (joint, target) in steps {
         w.reset(&w.home_state());
         let mut q = vec![0.0; 7];
@@ -50,5 +58,8 @@ fn targets_are_clamped_to_joint_limits() {
         w.step();
     }
     let q = w.joint_positions();
-    assert!((q[0] - 2.8).abs() < 0.01 && (q[6] + 2.8).abs() < 0.01, "settled at {q:?}");
+    assert!(
+        (q[0] - 2.8).abs() < 0.01 && (q[6] + 2.8).abs() < 0.01,
+        "settled at {q:?}"
+    );
 }

@@ -32,12 +32,16 @@ pub struct ModuleInstance {
 impl ModuleInstance {
     /// Joint names of the position actuators (an arm's 7 joints), in order.
     pub fn position_joints(&self) -> impl Iterator<Item = &Actuator> {
-        self.actuators.iter().filter(|a| a.mode == ActuatorMode::Position)
+        self.actuators
+            .iter()
+            .filter(|a| a.mode == ActuatorMode::Position)
     }
 
     /// Joint names of the velocity actuators (a wheel module's wheels), in order.
     pub fn velocity_joints(&self) -> impl Iterator<Item = &Actuator> {
-        self.actuators.iter().filter(|a| a.mode == ActuatorMode::Velocity)
+        self.actuators
+            .iter()
+            .filter(|a| a.mode == ActuatorMode::Velocity)
     }
 }
 
@@ -134,7 +138,11 @@ pub fn assemble(morphology: &Morphology, library: &ModuleLibrary) -> RobotModel 
                 friction: c.friction,
             });
         }
-        for option in module.options.iter().filter(|o| entry.options.contains(&o.name)) {
+        for option in module
+            .options
+            .iter()
+            .filter(|o| entry.options.contains(&o.name))
+        {
             for extra in &option.collision {
                 let link_name = p(&extra.link);
                 let link = links
@@ -167,7 +175,9 @@ pub fn assemble(morphology: &Morphology, library: &ModuleLibrary) -> RobotModel 
                 .find(|m| m.name == mount.parent)
                 .expect("validated");
             let parent_module = library.get(&parent_entry.kind).expect("validated");
-            let parent_conn = parent_module.connector(&mount.connector).expect("validated");
+            let parent_conn = parent_module
+                .connector(&mount.connector)
+                .expect("validated");
             let child_conn = module.connector(&mount.child_connector).expect("validated");
             // Child connector faces the parent's: flip about x, then turn by spin about z.
             let parent_to_child_root = parent_conn.pose

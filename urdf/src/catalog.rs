@@ -49,9 +49,13 @@ impl ModuleLibrary {
         let modules = SHIPPED_MODULES
             .iter()
             .map(|(kind, file, toml_text, urdf_text)| {
-                let module = Module::parse(&format!("<shipped>/modules/{file}"), toml_text, urdf_text)
-                    .unwrap_or_else(|e| panic!("shipped module `{kind}` is invalid: {e}"));
-                assert_eq!(&module.kind, kind, "shipped module file {file} declares another kind");
+                let module =
+                    Module::parse(&format!("<shipped>/modules/{file}"), toml_text, urdf_text)
+                        .unwrap_or_else(|e| panic!("shipped module `{kind}` is invalid: {e}"));
+                assert_eq!(
+                    &module.kind, kind,
+                    "shipped module file {file} declares another kind"
+                );
                 module
             })
             .collect();
@@ -77,16 +81,26 @@ pub fn shipped_morphologies() -> Vec<&'static str> {
 }
 
 /// Loads a morphology by shipped name (`tricycle`) or by path to a TOML file.
-pub fn load_morphology(name_or_path: &str, library: &ModuleLibrary) -> Result<Morphology, ModelError> {
-    if let Some((name, text)) = SHIPPED_MORPHOLOGIES.iter().find(|(n, _)| *n == name_or_path) {
-        return Morphology::parse(&format!("<shipped>/morphologies/{name}.toml"), text, library);
+pub fn load_morphology(
+    name_or_path: &str,
+    library: &ModuleLibrary,
+) -> Result<Morphology, ModelError> {
+    if let Some((name, text)) = SHIPPED_MORPHOLOGIES
+        .iter()
+        .find(|(n, _)| *n == name_or_path)
+    {
+        return Morphology::parse(
+            &format!("<shipped>/morphologies/{name}.toml"),
+            text,
+            library,
+        );
     }
     let path = Path::new(name_or_path);
     let text = std::fs::read_to_string(path).map_err(|e| {
         ModelError::new(
             name_or_path,
             "-",
-            Problem::BadValue(format!(
+            Problem::Unreadable(format!(
                 "not a shipped morphology ({}) and not a readable file: {e}",
                 shipped_morphologies().join(", ")
             )),

@@ -23,6 +23,8 @@ pub enum Problem {
     BadValue(String),
     /// The module URDF itself is broken.
     BadUrdf(String),
+    /// The file cannot be read.
+    Unreadable(String),
 }
 
 impl fmt::Display for Problem {
@@ -34,22 +36,30 @@ impl fmt::Display for Problem {
                 write!(f, "unknown field (known fields: {})", known.join(", "))
             }
             Problem::UnknownModule { kind, known } => {
-                write!(f, "unknown module kind `{kind}` (known: {})", known.join(", "))
+                write!(
+                    f,
+                    "unknown module kind `{kind}` (known: {})",
+                    known.join(", ")
+                )
             }
             Problem::UnknownRole { role, allowed } => {
-                write!(f, "unknown role `{role}` (allowed here: {})", allowed.join(", "))
+                write!(
+                    f,
+                    "unknown role `{role}` (allowed here: {})",
+                    allowed.join(", ")
+                )
             }
             Problem::Duplicate { name } => write!(f, "duplicate name `{name}`"),
             Problem::BadMount(msg) => write!(f, "bad mount: {msg}"),
             Problem::BadValue(msg) => write!(f, "bad value: {msg}"),
             Problem::BadUrdf(msg) => write!(f, "bad URDF: {msg}"),
+            Problem::Unreadable(msg) => f.write_str(msg),
         }
     }
 }
 
 /// An error while loading modules or morphologies, or assembling a robot.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{file}: {field}: {problem}")]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ModelError {
     /// The file at fault (a path, or `<shipped>/name.toml` for built-in files).
     pub file: String,
@@ -57,6 +67,18 @@ pub struct ModelError {
     pub field: String,
     pub problem: Problem,
 }
+
+impl fmt::Display for ModelError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.field == "-" {
+            write!(f, "{}: {}", self.file, self.problem)
+        } else {
+            write!(f, "{}: {}: {}", self.file, self.field, self.problem)
+        }
+    }
+}
+
+impl std::error::Error for ModelError {}
 
 impl ModelError {
     pub fn new(file: impl Into<String>, field: impl Into<String>, problem: Problem) -> Self {

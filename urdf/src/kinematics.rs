@@ -77,7 +77,9 @@ impl KinematicTree {
                 });
             }
             let kind = match j.joint_type {
-                urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => JointKind::Revolute,
+                urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
+                    JointKind::Revolute
+                }
                 urdf_rs::JointType::Prismatic => JointKind::Prismatic,
                 urdf_rs::JointType::Fixed => JointKind::Fixed,
                 ref other => {
@@ -102,22 +104,29 @@ impl KinematicTree {
         }
         let roots: Vec<usize> = (0..links.len()).filter(|&i| !has_parent[i]).collect();
         if roots.len() != 1 {
-            return Err(TreeError::Roots(roots.iter().map(|&i| links[i].clone()).collect()));
+            return Err(TreeError::Roots(
+                roots.iter().map(|&i| links[i].clone()).collect(),
+            ));
         }
         let root = roots[0];
         // Order joints parents first (breadth-first from the root).
         let mut joints = Vec::with_capacity(unordered.len());
         let mut frontier = vec![root];
         while let Some(link) = frontier.pop() {
-            let (children, rest): (Vec<_>, Vec<_>) =
-                unordered.into_iter().partition(|j: &TreeJoint| j.parent_link == link);
+            let (children, rest): (Vec<_>, Vec<_>) = unordered
+                .into_iter()
+                .partition(|j: &TreeJoint| j.parent_link == link);
             unordered = rest;
             for j in children {
                 frontier.push(j.child_link);
                 joints.push(j);
             }
         }
-        Ok(Self { links, joints, root })
+        Ok(Self {
+            links,
+            joints,
+            root,
+        })
     }
 
     pub fn links(&self) -> &[String] {
@@ -172,11 +181,9 @@ pub fn joint_motion(joint: &TreeJoint, q: f64) -> Isometry3<f64> {
             Default::default(),
             UnitQuaternion::from_axis_angle(&joint.axis, q),
         ),
-        JointKind::Prismatic => Isometry3::translation(
-            joint.axis.x * q,
-            joint.axis.y * q,
-            joint.axis.z * q,
-        ),
+        JointKind::Prismatic => {
+            Isometry3::translation(joint.axis.x * q, joint.axis.y * q, joint.axis.z * q)
+        }
         JointKind::Fixed => Isometry3::identity(),
     }
 }
@@ -212,6 +219,9 @@ mod tests {
             r#"<robot name="t"><link name="a"/><link name="b"/></robot>"#,
         )
         .unwrap();
-        assert!(matches!(KinematicTree::new(&robot), Err(TreeError::Roots(_))));
+        assert!(matches!(
+            KinematicTree::new(&robot),
+            Err(TreeError::Roots(_))
+        ));
     }
 }

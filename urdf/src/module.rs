@@ -185,12 +185,16 @@ impl Module {
         }
         let mut actuators = Vec::with_capacity(raw.actuator.len());
         for (i, a) in raw.actuator.iter().enumerate() {
-            let joint = urdf.joints.iter().find(|j| j.name == a.joint).ok_or_else(|| {
-                err(
-                    format!("actuator[{i}].joint"),
-                    Problem::BadUrdf(format!("no joint `{}` in {}", a.joint, raw.urdf)),
-                )
-            })?;
+            let joint = urdf
+                .joints
+                .iter()
+                .find(|j| j.name == a.joint)
+                .ok_or_else(|| {
+                    err(
+                        format!("actuator[{i}].joint"),
+                        Problem::BadUrdf(format!("no joint `{}` in {}", a.joint, raw.urdf)),
+                    )
+                })?;
             let (lower, upper) = match joint.joint_type {
                 urdf_rs::JointType::Revolute => (joint.limit.lower, joint.limit.upper),
                 urdf_rs::JointType::Continuous => (f64::NEG_INFINITY, f64::INFINITY),
@@ -258,7 +262,7 @@ impl Module {
                         Problem::BadUrdf(format!("no link `{}` in {}", extra.link, raw.urdf)),
                     ));
                 }
-                if !(extra.sphere > 0.0) {
+                if extra.sphere.is_nan() || extra.sphere <= 0.0 {
                     return Err(err(
                         format!("option[{i}].collision[{k}].sphere"),
                         Problem::BadValue("sphere radius must be positive [m]".into()),

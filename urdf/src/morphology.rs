@@ -134,7 +134,9 @@ impl Morphology {
             return Err(ModelError::new(
                 file,
                 "name",
-                Problem::BadValue(format!("`{name}` is not a valid robot name (non-empty, no `/` or spaces)")),
+                Problem::BadValue(format!(
+                    "`{name}` is not a valid robot name (non-empty, no `/` or spaces)"
+                )),
             ));
         }
         let description = raw.description.unwrap_or_default();
@@ -156,11 +158,17 @@ impl Morphology {
                 return Err(ModelError::new(
                     file,
                     at("name"),
-                    Problem::BadValue(format!("`{mname}` is not a valid module name (non-empty, no `/` or spaces)")),
+                    Problem::BadValue(format!(
+                        "`{mname}` is not a valid module name (non-empty, no `/` or spaces)"
+                    )),
                 ));
             }
             if !names.insert(mname.clone()) {
-                return Err(ModelError::new(file, at("name"), Problem::Duplicate { name: mname }));
+                return Err(ModelError::new(
+                    file,
+                    at("name"),
+                    Problem::Duplicate { name: mname },
+                ));
             }
             let kind = required(m.kind, file, &at("kind"))?;
             let module = library.get(&kind).ok_or_else(|| {
@@ -194,7 +202,11 @@ impl Morphology {
                         at(&format!("options[{k}]")),
                         Problem::BadValue(format!(
                             "module kind `{kind}` has no option `{opt}` (options: {})",
-                            if known.is_empty() { "none".to_string() } else { known.join(", ") }
+                            if known.is_empty() {
+                                "none".to_string()
+                            } else {
+                                known.join(", ")
+                            }
                         )),
                     ));
                 }
@@ -307,13 +319,16 @@ fn validate_tree(
     for (i, m) in modules.iter().enumerate() {
         let Some(mount) = &m.mount else { continue };
         let at = |f: &str| format!("module[{i}].mount.{f}");
-        let parent = modules.iter().find(|p| p.name == mount.parent).ok_or_else(|| {
-            ModelError::new(
-                file,
-                at("parent"),
-                Problem::BadMount(format!("no module named `{}`", mount.parent)),
-            )
-        })?;
+        let parent = modules
+            .iter()
+            .find(|p| p.name == mount.parent)
+            .ok_or_else(|| {
+                ModelError::new(
+                    file,
+                    at("parent"),
+                    Problem::BadMount(format!("no module named `{}`", mount.parent)),
+                )
+            })?;
         if parent.name == m.name {
             return Err(ModelError::new(
                 file,
@@ -323,7 +338,11 @@ fn validate_tree(
         }
         let parent_module = library.get(&parent.kind).expect("validated above");
         if parent_module.connector(&mount.connector).is_none() {
-            let known: Vec<_> = parent_module.connectors.iter().map(|c| c.name.as_str()).collect();
+            let known: Vec<_> = parent_module
+                .connectors
+                .iter()
+                .map(|c| c.name.as_str())
+                .collect();
             return Err(ModelError::new(
                 file,
                 at("connector"),
@@ -350,7 +369,9 @@ fn validate_tree(
             ));
         }
         let child_module = library.get(&m.kind).expect("validated above");
-        let child_conn = child_module.connector(&mount.child_connector).expect("validated above");
+        let child_conn = child_module
+            .connector(&mount.child_connector)
+            .expect("validated above");
         if child_conn.link != child_module.root_link {
             return Err(ModelError::new(
                 file,
@@ -369,7 +390,10 @@ fn validate_tree(
             match &current.mount {
                 None => break,
                 Some(mount) => {
-                    current = modules.iter().find(|p| p.name == mount.parent).expect("checked");
+                    current = modules
+                        .iter()
+                        .find(|p| p.name == mount.parent)
+                        .expect("checked");
                 }
             }
         }

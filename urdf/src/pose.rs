@@ -31,7 +31,11 @@ pub fn rpy(rotation: &UnitQuaternion<f64>) -> [f64; 3] {
     if cos_p < 1e-9 {
         [(-m[(1, 2)]).atan2(m[(1, 1)]), pitch, 0.0]
     } else {
-        [m[(2, 1)].atan2(m[(2, 2)]), pitch, m[(1, 0)].atan2(m[(0, 0)])]
+        [
+            m[(2, 1)].atan2(m[(2, 2)]),
+            pitch,
+            m[(1, 0)].atan2(m[(0, 0)]),
+        ]
     }
 }
 

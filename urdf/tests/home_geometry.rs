@@ -4,7 +4,9 @@
 use std::collections::HashSet;
 
 use kumi_model::kinematics::KinematicTree;
-use kumi_model::{assemble, load_morphology, shipped_morphologies, ModuleLibrary, RobotModel, Role};
+use kumi_model::{
+    assemble, load_morphology, shipped_morphologies, ModuleLibrary, RobotModel, Role,
+};
 use nalgebra::{Isometry3, Vector3};
 
 fn model(name: &str) -> RobotModel {
@@ -45,11 +47,19 @@ fn every_shipped_morphology_has_unique_names() {
         // URDF keeps link and joint names in separate namespaces.
         let mut links = HashSet::new();
         for l in &m.urdf.links {
-            assert!(links.insert(l.name.clone()), "{name}: duplicate link {}", l.name);
+            assert!(
+                links.insert(l.name.clone()),
+                "{name}: duplicate link {}",
+                l.name
+            );
         }
         let mut joints = HashSet::new();
         for j in &m.urdf.joints {
-            assert!(joints.insert(j.name.clone()), "{name}: duplicate joint {}", j.name);
+            assert!(
+                joints.insert(j.name.clone()),
+                "{name}: duplicate joint {}",
+                j.name
+            );
         }
         KinematicTree::new(&m.urdf).unwrap();
     }
@@ -72,7 +82,10 @@ fn wheels_stand_level_at_home() {
         let axles = wheel_axles(&model(name));
         let z0 = axles[0].0.z;
         for (centre, axle) in &axles {
-            assert!((centre.z - z0).abs() < 0.01, "{name}: axle heights {axles:?}");
+            assert!(
+                (centre.z - z0).abs() < 0.01,
+                "{name}: axle heights {axles:?}"
+            );
             assert!(axle.z.abs() < 1e-6, "{name}: axle not horizontal: {axle}");
         }
     }
@@ -82,7 +95,11 @@ fn wheels_stand_level_at_home() {
 fn wheel_axles_are_parallel_so_the_robot_drives_along_base_x() {
     for name in ["minimal", "dragon", "tricycle"] {
         for (_, axle) in wheel_axles(&model(name)) {
-            assert!(axle.y.abs() > 1.0 - 1e-6, "{name}: axle {axle} not along base y: {:?}", wheel_axles(&model(name)));
+            assert!(
+                axle.y.abs() > 1.0 - 1e-6,
+                "{name}: axle {axle} not along base y: {:?}",
+                wheel_axles(&model(name))
+            );
         }
     }
 }
@@ -95,5 +112,9 @@ fn the_fixed_arm_tool_points_up_at_zero_and_its_x_axis_is_the_arm_axis() {
     let x = ee.rotation * Vector3::x();
     assert!((x - Vector3::z()).norm() < 1e-9, "tool x axis {x}");
     // Joint offsets along z sum to 1.359 m, plus the 0.1 m tool.
-    assert!((ee.translation.vector.z - 1.459).abs() < 1e-3, "{}", ee.translation.vector);
+    assert!(
+        (ee.translation.vector.z - 1.459).abs() < 1e-3,
+        "{}",
+        ee.translation.vector
+    );
 }

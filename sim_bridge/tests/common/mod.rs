@@ -9,7 +9,10 @@ use nalgebra::Vector3;
 
 pub fn model(name: &str) -> Arc<RobotModel> {
     let library = ModuleLibrary::shipped();
-    Arc::new(assemble(&load_morphology(name, &library).unwrap(), &library))
+    Arc::new(assemble(
+        &load_morphology(name, &library).unwrap(),
+        &library,
+    ))
 }
 
 pub fn world(name: &str) -> World {
@@ -52,7 +55,11 @@ pub fn random_commands(world: &mut World, rng: &mut Rng) {
         if !positions.is_empty() {
             world.set_position_targets(&m.name, &positions).unwrap();
         }
-        if let Some(w) = m.actuators.iter().find(|a| a.mode == ActuatorMode::Velocity) {
+        if let Some(w) = m
+            .actuators
+            .iter()
+            .find(|a| a.mode == ActuatorMode::Velocity)
+        {
             let v = rng.uniform(-w.velocity_limit, w.velocity_limit);
             world.set_wheel_velocity(&m.name, v).unwrap();
         }
