@@ -127,13 +127,9 @@ fn stability(model: &Arc<RobotModel>, config: SimConfig) -> Result<Stability> {
     })
 }
 
-fn bench_model(
-    name: &str,
-    args: &BenchSimArgs,
-    config: SimConfig,
-    worlds: usize,
-) -> Result<Vec<Record>> {
+fn bench_model(name: &str, args: &BenchSimArgs, worlds: usize) -> Result<Vec<Record>> {
     let model = load_model(name)?;
+    let config = args.physics.config(&model);
     let steps = (args.seconds * config.control_hz).round().max(1.0) as u64;
 
     let build_ms = median(
@@ -194,7 +190,6 @@ pub fn run(what: BenchCommand) -> Result<()> {
     if !(args.seconds.is_finite() && args.seconds > 0.0) {
         bail!("--seconds must be positive, got {}", args.seconds);
     }
-    let config = args.physics.config();
     let worlds = if args.worlds == 0 {
         std::thread::available_parallelism().map_or(1, |n| n.get())
     } else {
@@ -202,8 +197,8 @@ pub fn run(what: BenchCommand) -> Result<()> {
     };
     let mut records = Vec::new();
     for name in &args.models {
-        tracing::info!("benchmarking {name} ({})", config.label());
-        records.extend(bench_model(name, &args, config, worlds)?);
+        tracing::info!("benchmarking {name}");
+        records.extend(bench_model(name, &args, worlds)?);
     }
     if args.json {
         println!("{}", serde_json::to_string(&records)?);

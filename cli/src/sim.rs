@@ -34,10 +34,11 @@ impl From<LayoutArg> for Layout {
     }
 }
 
-/// Physics settings shared by `sim` and `bench`; defaults are [`SimConfig::default`].
+/// Physics overrides shared by `sim` and `bench`; unset, a robot is simulated with
+/// [`SimConfig::for_model`] (the defaults and its morphology's `[physics]` table).
 #[derive(Args, Clone, Debug)]
 pub struct PhysicsArgs {
-    /// Articulation layout (default: the library default).
+    /// Articulation layout (default: the morphology's).
     #[arg(long, value_enum)]
     pub layout: Option<LayoutArg>,
     /// Physics steps per control step.
@@ -52,8 +53,8 @@ pub struct PhysicsArgs {
 }
 
 impl PhysicsArgs {
-    pub fn config(&self) -> SimConfig {
-        let mut c = SimConfig::default();
+    pub fn config(&self, model: &RobotModel) -> SimConfig {
+        let mut c = SimConfig::for_model(model);
         if let Some(l) = self.layout {
             c.layout = l.into();
         }
@@ -137,7 +138,7 @@ pub fn run(args: SimArgs) -> Result<()> {
         );
     }
     let model = load_model(&args.morphology)?;
-    let config = args.physics.config();
+    let config = args.physics.config(&model);
     let mut world = World::new(model.clone(), config).context("building the world")?;
     for (module, sign) in wheel_directions(&world) {
         world.set_wheel_velocity(&module, sign * args.wheel_velocity)?;

@@ -1,37 +1,9 @@
 //! Simulation settings: timestep, solver iterations and the articulation layout.
 
-/// How the robot's joints are split between rapier's multibodies (reduced coordinates, exact
-/// joints) and impulse joints (constraints, which flex a little but keep multibodies small).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Layout {
-    /// The whole robot is one multibody: exact mounts, cost grows with DoF squared.
-    SingleMultibody,
-    /// Each limb is its own multibody: a module with children starts a new multibody, joined to
-    /// its parent by a fixed impulse joint; leaf modules (a wheel module at a leg's tip, a lone
-    /// manipulator) stay in their parent's multibody.
-    PerLimb,
-    /// Each module is its own multibody; every mount is a fixed impulse joint.
-    PerModule,
-}
+use kumi_model::{Layout, RobotModel};
 
-impl Layout {
-    pub const ALL: [Layout; 3] = [Layout::SingleMultibody, Layout::PerLimb, Layout::PerModule];
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Layout::SingleMultibody => "single-multibody",
-            Layout::PerLimb => "per-limb",
-            Layout::PerModule => "per-module",
-        }
-    }
-
-    pub fn parse(s: &str) -> Option<Layout> {
-        Layout::ALL.into_iter().find(|l| l.as_str() == s)
-    }
-}
-
-/// Simulation settings. [`SimConfig::default`] is the configuration that passes the stability
-/// tests and the one training, evaluation and the sim bridge use.
+/// Simulation settings. Training, evaluation and the sim bridge take them from
+/// [`SimConfig::for_model`]: the defaults, overridden by the morphology's `[physics]` table.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimConfig {
     /// Control rate [Hz]: one [`crate::World::step`] is one control step (paper: 30 Hz).
@@ -67,6 +39,16 @@ impl Default for SimConfig {
 }
 
 impl SimConfig {
+    /// The settings a robot is simulated with everywhere: [`SimConfig::default`], overridden by
+    /// its morphology file's `[physics]` table.
+    pub fn for_model(model: &RobotModel) -> Self {
+        let d = Self::default();
+        Self {
+            layout: model.physics.layout.unwrap_or(d.layout),
+            ..d
+        }
+    }
+
     /// Physics timestep [s].
     pub fn dt(&self) -> f64 {
         1.0 / (self.control_hz * f64::from(self.substeps))

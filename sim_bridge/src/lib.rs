@@ -12,6 +12,7 @@ mod spawn;
 mod world;
 
 pub use actuator::{clamp_command, integrate_velocity_setpoint, slew, ServoState};
-pub use config::{Layout, SimConfig};
+pub use config::SimConfig;
 pub use error::SimError;
+pub use kumi_model::Layout;
 pub use world::{Contact, RobotState, Snapshot, World, GROUND};

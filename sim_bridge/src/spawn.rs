@@ -9,9 +9,10 @@ use nalgebra::Isometry3;
 use rapier3d::prelude::*;
 use rapier3d_urdf::{UrdfLoaderOptions, UrdfRobot};
 
-use crate::config::{Layout, SimConfig};
+use crate::config::SimConfig;
 use crate::convert::{to_na_isometry, to_rapier_pose};
 use crate::error::SimError;
+use kumi_model::Layout;
 
 /// Where a URDF link lives in rapier: a rigid body, and the link frame in that body's frame
 /// (not the identity for frame-only links such as `ee`, which the loader folds into a parent).

@@ -69,7 +69,8 @@ fn reset_to_another_configuration_matches_a_fresh_world_reset_there() {
 
 #[test]
 fn restoring_a_snapshot_replays_bit_for_bit() {
-    let mut w = World::new(model("dragon"), SimConfig::default()).unwrap();
+    let model = model("dragon");
+    let mut w = World::new(model.clone(), SimConfig::for_model(&model)).unwrap();
     trajectory(&mut w, 1, 30);
     let snapshot = w.snapshot();
     let first = trajectory(&mut w, 2, 45);

@@ -6,6 +6,7 @@ use nalgebra::{Isometry3, Translation3};
 use crate::catalog::ModuleLibrary;
 use crate::module::{Actuator, ActuatorMode, ContactMaterial};
 use crate::morphology::{Morphology, Role};
+use crate::physics::PhysicsSettings;
 use crate::pose;
 
 /// One module of an assembled robot; every name in it is prefixed (`arm0/joint1`).
@@ -59,6 +60,8 @@ pub struct RobotModel {
     pub modules: Vec<ModuleInstance>,
     /// Friction coefficients by prefixed collision name (`wheel0/tyre`).
     pub contacts: Vec<ContactMaterial>,
+    /// How this robot is best simulated, from its morphology file.
+    pub physics: PhysicsSettings,
 }
 
 impl RobotModel {
@@ -241,5 +244,6 @@ pub fn assemble(morphology: &Morphology, library: &ModuleLibrary) -> RobotModel 
         base_link,
         modules: instances,
         contacts,
+        physics: morphology.physics,
     }
 }

@@ -12,6 +12,7 @@ mod error;
 pub mod kinematics;
 mod module;
 mod morphology;
+mod physics;
 pub mod pose;
 
 pub use assemble::{assemble, ModuleInstance, RobotModel};
@@ -19,3 +20,4 @@ pub use catalog::{load_morphology, shipped_morphologies, ModuleLibrary, SHIPPED_
 pub use error::{ModelError, Problem};
 pub use module::{Actuator, ActuatorMode, Connector, ContactMaterial, Module};
 pub use morphology::{Morphology, MorphologyModule, Mount, Role};
+pub use physics::{Layout, PhysicsSettings};

@@ -8,6 +8,7 @@ use serde::Deserialize;
 
 use crate::catalog::ModuleLibrary;
 use crate::error::{from_toml, ModelError, Problem};
+use crate::physics::{PhysicsSettings, RawPhysics};
 
 /// What a module does in a morphology.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -78,6 +79,8 @@ pub struct Morphology {
     pub fixed_base: bool,
     /// Modules with every parent before its children; the first is the root.
     pub modules: Vec<MorphologyModule>,
+    /// How this robot is best simulated (the `[physics]` table).
+    pub physics: PhysicsSettings,
 }
 
 #[derive(Debug, Deserialize)]
@@ -88,6 +91,8 @@ struct RawMorphology {
     #[serde(default)]
     fixed_base: bool,
     module: Option<Vec<RawModule>>,
+    #[serde(default)]
+    physics: RawPhysics,
 }
 
 #[derive(Debug, Deserialize)]
@@ -140,6 +145,7 @@ impl Morphology {
             ));
         }
         let description = raw.description.unwrap_or_default();
+        let physics = raw.physics.validate(file)?;
         let raw_modules = required(raw.module, file, "module")?;
         if raw_modules.is_empty() {
             return Err(ModelError::new(
@@ -286,6 +292,7 @@ impl Morphology {
             description,
             fixed_base: raw.fixed_base,
             modules: order_parents_first(modules),
+            physics,
         })
     }
 

@@ -257,3 +257,28 @@ fn a_user_file_on_disk_is_accepted() {
     assert_eq!(m.name, "test");
     assert_eq!(m.modules.len(), 2);
 }
+
+#[test]
+fn unknown_physics_layout() {
+    let err = parse(&format!("{BASE}\n[physics]\nlayout = \"jelly\"\n"));
+    assert_eq!(err.field, "physics.layout");
+    assert!(
+        err.to_string()
+            .contains("unknown layout `jelly` (known: single-multibody, per-limb, per-module)"),
+        "{err}"
+    );
+    // Step settings are global on purpose (servo response depends on them): refused here.
+    let err = parse(&format!("{BASE}\n[physics]\nsubsteps = 2\n"));
+    assert!(matches!(err.problem, Problem::UnknownField { .. }), "{err}");
+}
+
+#[test]
+fn a_physics_layout_is_read() {
+    let m = Morphology::parse(
+        FILE,
+        &format!("{BASE}\n[physics]\nlayout = \"single-multibody\"\n"),
+        &ModuleLibrary::shipped(),
+    )
+    .unwrap();
+    assert_eq!(m.physics.layout, Some(kumi_model::Layout::SingleMultibody));
+}

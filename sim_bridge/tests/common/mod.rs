@@ -16,7 +16,8 @@ pub fn model(name: &str) -> Arc<RobotModel> {
 }
 
 pub fn world(name: &str) -> World {
-    World::new(model(name), SimConfig::default()).unwrap()
+    let model = model(name);
+    World::new(model.clone(), SimConfig::for_model(&model)).unwrap()
 }
 
 /// SplitMix64: a tiny seeded generator, so command sequences are reproducible.
