@@ -1,6 +1,7 @@
 //! `kumi`: the front door to every kumi tool.
 
 mod bench;
+mod bridge;
 mod sim;
 
 use std::process::ExitCode;
@@ -28,6 +29,8 @@ enum Command {
     },
     /// Simulate a morphology for a while and report what happened.
     Sim(sim::SimArgs),
+    /// Run the sim bridge node: the simulated robot on ROS 2 (stop with Ctrl-C).
+    SimBridge(bridge::BridgeArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -50,7 +53,12 @@ fn run() -> Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+                // RustDDS reports every discovery event at info: keep it to warnings.
+                .unwrap_or_else(|_| {
+                    tracing_subscriber::EnvFilter::new(
+                        "info,rustdds=warn,ros2_client=warn,ros2_client::distributions=error",
+                    )
+                }),
         )
         .with_writer(std::io::stderr)
         .init();
@@ -62,6 +70,7 @@ fn run() -> Result<()> {
             Ok(())
         }
         Command::Sim(args) => sim::run(args),
+        Command::SimBridge(args) => bridge::run(args),
         Command::Bench { what } => bench::run(what),
     }
 }

@@ -1,1 +1,162 @@
-//! End-to-end tests live in tests/.
+//! Harness for kumi's end-to-end tests: an in-process sim bridge on a private ROS domain, and
+//! real rclpy peers (`tests/ros/peer.py`) run as separate processes with hard deadlines.
+//!
+//! rclpy comes from PyPI (ROS 2 Kilted) in a virtual environment: `.ci/run` creates it at
+//! `target/rosvenv`; `KUMI_ROS_PYTHON` may point at another interpreter. The tests never skip
+//! when it is missing: they fail and say how to install it.
+
+use std::io::Read;
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicU16, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use kumi_model::{assemble, load_morphology, ModuleLibrary};
+use kumi_sim_bridge::{BridgeConfig, BridgeError, Mode};
+
+/// The workspace root.
+pub fn workspace() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The Python interpreter that has rclpy.
+pub fn python() -> PathBuf {
+    let path = std::env::var_os("KUMI_ROS_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace().join("target/rosvenv/bin/python"));
+    assert!(
+        path.exists(),
+        "no Python with rclpy at {}: run `bash .ci/run`, or create it with \
+         `python3 -m venv target/rosvenv && target/rosvenv/bin/pip install ros-rclpy \
+         ros-rmw-fastrtps-cpp ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-nav-msgs \
+         ros-rosgraph-msgs ros-diagnostic-msgs` (or set KUMI_ROS_PYTHON)",
+        path.display()
+    );
+    path
+}
+
+/// A ROS domain id no other test of this run uses: tests run in parallel without crosstalk.
+/// Different test processes start from different offsets.
+pub fn fresh_domain() -> u16 {
+    static NEXT: AtomicU16 = AtomicU16::new(0);
+    let base = 20 + (std::process::id() % 8) as u16 * 20;
+    base + NEXT.fetch_add(1, Ordering::Relaxed) % 20
+}
+
+/// A sim bridge running in a thread; stopped when dropped.
+pub struct Bridge {
+    pub robot: String,
+    pub domain: u16,
+    shutdown: Arc<AtomicBool>,
+    handle: Option<JoinHandle<Result<(), BridgeError>>>,
+}
+
+impl Bridge {
+    /// Starts a bridge for a shipped morphology on `domain`, and waits until it has started.
+    pub fn start(morphology: &str, domain: u16, mode: Mode) -> Self {
+        Self::start_named(morphology, morphology, domain, mode)
+    }
+
+    pub fn start_named(morphology: &str, robot: &str, domain: u16, mode: Mode) -> Self {
+        let library = ModuleLibrary::shipped();
+        let model = Arc::new(assemble(
+            &load_morphology(morphology, &library).unwrap(),
+            &library,
+        ));
+        let config = BridgeConfig {
+            model,
+            robot: robot.to_string(),
+            domain_id: domain,
+            mode,
+            stale_after_s: 0.5,
+            duplicate_check: Duration::from_millis(500),
+        };
+        let shutdown = Arc::new(AtomicBool::new(false));
+        let flag = shutdown.clone();
+        let handle = std::thread::spawn(move || kumi_sim_bridge::run(config, flag));
+        Self {
+            robot: robot.to_string(),
+            domain,
+            shutdown,
+            handle: Some(handle),
+        }
+    }
+
+    /// Whether the bridge is still running.
+    pub fn alive(&self) -> bool {
+        self.handle.as_ref().is_some_and(|h| !h.is_finished())
+    }
+
+    /// Stops the bridge and returns how it ended.
+    pub fn stop(mut self) -> Result<(), BridgeError> {
+        self.shutdown.store(true, Ordering::Relaxed);
+        self.handle
+            .take()
+            .expect("not yet joined")
+            .join()
+            .expect("bridge thread panicked")
+    }
+}
+
+impl Drop for Bridge {
+    fn drop(&mut self) {
+        self.shutdown.store(true, Ordering::Relaxed);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+/// Runs `tests/ros/peer.py <args>` on `domain` and returns its JSON result; kills it after
+/// `deadline`.
+pub fn peer(domain: u16, args: &[&str], deadline: Duration) -> serde_json::Value {
+    let mut child = Command::new(python())
+        .arg(workspace().join("tests/ros/peer.py"))
+        .args(args)
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .env("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the rclpy peer");
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if start.elapsed() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "rclpy peer `{}` ran past its {:?} deadline",
+                args.join(" "),
+                deadline
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut stdout = String::new();
+    let mut stderr = String::new();
+    child
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut stdout)
+        .unwrap();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
+    assert!(
+        status.success(),
+        "rclpy peer `{}` failed: {status}\n{stderr}",
+        args.join(" ")
+    );
+    let last = stdout.lines().last().unwrap_or_default();
+    serde_json::from_str(last)
+        .unwrap_or_else(|e| panic!("peer printed no JSON ({e}):\n{stdout}\n{stderr}"))
+}

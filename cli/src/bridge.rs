@@ -1,0 +1,65 @@
+//! `kumi sim-bridge`: the simulated robot on ROS 2.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use kumi_sim_bridge::{BridgeConfig, Mode};
+
+use crate::sim::load_model;
+
+#[derive(Args, Debug)]
+pub struct BridgeArgs {
+    /// `minimal`, `dragon`, `tricycle`, `arm`, or a path to a morphology file.
+    pub morphology: String,
+    /// Robot name, the namespace of every topic (default: the morphology's name).
+    #[arg(long)]
+    pub robot: Option<String>,
+    /// Advance one control step only when every commanded module has sent its command for the
+    /// tick (or the lockstep timeout passes); publishes /clock; runs as fast as its consumers.
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Lockstep: step anyway after this long without every expected command [s].
+    #[arg(long, default_value_t = 0.5)]
+    pub lockstep_timeout: f64,
+    /// Real-time mode: simulated seconds per wall-clock second.
+    #[arg(long, default_value_t = 1.0)]
+    pub realtime_factor: f64,
+    /// A module whose commands stop for this long [s of sim time] holds its position.
+    #[arg(long, default_value_t = 0.5)]
+    pub stale_after: f64,
+}
+
+pub fn run(args: BridgeArgs) -> Result<()> {
+    let model = load_model(&args.morphology)?;
+    if !(args.lockstep_timeout.is_finite() && args.lockstep_timeout > 0.0) {
+        bail!("--lockstep-timeout must be a positive number of seconds");
+    }
+    if !(args.stale_after.is_finite() && args.stale_after > 0.0) {
+        bail!("--stale-after must be a positive number of seconds");
+    }
+    let config = BridgeConfig {
+        robot: args.robot.unwrap_or_else(|| model.name.clone()),
+        domain_id: kumi_ros::domain_id_from_env()?,
+        model,
+        mode: if args.lockstep {
+            Mode::Lockstep {
+                timeout: Duration::from_secs_f64(args.lockstep_timeout),
+            }
+        } else {
+            Mode::RealTime {
+                factor: args.realtime_factor,
+            }
+        },
+        stale_after_s: args.stale_after,
+        duplicate_check: Duration::from_millis(1500),
+    };
+    let shutdown = Arc::new(AtomicBool::new(false));
+    let flag = shutdown.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    kumi_sim_bridge::run(config, shutdown)?;
+    Ok(())
+}

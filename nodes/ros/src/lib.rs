@@ -1,0 +1,145 @@
+//! kumi's ROS 2 plumbing on `ros2-client` (RustDDS): no C libraries, no ROS install.
+//!
+//! - [`RosNode::new`] takes the domain id explicitly (ros2-client's default context always uses
+//!   domain 0); binaries read `ROS_DOMAIN_ID` once with [`domain_id_from_env`], tests pick
+//!   their own so they can run in parallel without crosstalk.
+//! - [`qos`] holds the QoS presets, each with the reason it is chosen.
+//! - [`RosNode::publisher`] / [`RosNode::subscription`] derive the ROS type from the Rust type
+//!   ([`kumi_msgs::RosMessage`]), so a topic's type is written once.
+//! - [`topics`] is the one place topic names are built.
+
+pub mod geometry;
+pub mod qos;
+pub mod topics;
+mod warn;
+
+pub use warn::RateLimited;
+
+use kumi_msgs::RosMessage;
+use ros2_client::{
+    Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions, Publisher, QosProfile,
+    Subscription,
+};
+
+/// Errors creating ROS entities.
+#[derive(Debug, thiserror::Error)]
+pub enum RosError {
+    #[error("ROS_DOMAIN_ID must be an integer from 0 to 232, got `{0}`")]
+    BadDomainId(String),
+    #[error("invalid ROS name `{name}`: {reason}")]
+    BadName { name: String, reason: String },
+    #[error("cannot create the ROS 2 context: {0}")]
+    Context(String),
+    #[error("cannot create {what} `{name}`: {reason}")]
+    Create {
+        what: &'static str,
+        name: String,
+        reason: String,
+    },
+}
+
+/// The domain id from `ROS_DOMAIN_ID` (0 when unset), as ROS 2 tools read it.
+pub fn domain_id_from_env() -> Result<u16, RosError> {
+    match std::env::var("ROS_DOMAIN_ID") {
+        Err(_) => Ok(0),
+        Ok(s) if s.trim().is_empty() => Ok(0),
+        Ok(s) => match s.trim().parse::<u16>() {
+            Ok(id) if id <= 232 => Ok(id),
+            _ => Err(RosError::BadDomainId(s)),
+        },
+    }
+}
+
+/// One ROS 2 node with its context.
+pub struct RosNode {
+    // Fields drop in order: the node (and its writers) before the context it lives in.
+    node: ros2_client::Node,
+    context: Context,
+}
+
+impl RosNode {
+    /// Creates a node `namespace/name` on ROS domain `domain`.
+    pub fn new(namespace: &str, name: &str, domain: u16) -> Result<Self, RosError> {
+        let context = Context::with_options(ContextOptions::new().domain_id(domain))
+            .map_err(|e| RosError::Context(format!("{e:?}")))?;
+        let node_name = NodeName::new(namespace, name).map_err(|e| RosError::BadName {
+            name: format!("{namespace}/{name}"),
+            reason: format!("{e:?}"),
+        })?;
+        let node = context
+            .new_node(node_name, NodeOptions::new().enable_rosout(false))
+            .map_err(|e| RosError::Create {
+                what: "node",
+                name: name.to_string(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Self { node, context })
+    }
+
+    pub fn domain_id(&self) -> u16 {
+        self.context.domain_id()
+    }
+
+    /// How many writers of other participants publish on the absolute topic `full_name`, as
+    /// DDS discovery knows them now (discovery takes a moment after start-up). Read from the
+    /// participant, not from ros2-client's graph, which only updates while its spinner runs.
+    pub fn remote_publishers(&self, full_name: &str) -> usize {
+        let dds_name = format!("rt{full_name}");
+        self.context
+            .domain_participant()
+            .discovered_writers()
+            .iter()
+            .filter(|w| w.publication_topic_data.topic_name == dds_name)
+            .count()
+    }
+
+    fn topic<M: RosMessage>(
+        &mut self,
+        full_name: &str,
+        qos: &QosProfile,
+    ) -> Result<ros2_client::dds::rustdds::Topic, RosError> {
+        let name = Name::parse(full_name).map_err(|e| RosError::BadName {
+            name: full_name.to_string(),
+            reason: format!("{e:?}"),
+        })?;
+        self.node
+            .create_topic(&name, MessageTypeName::new(M::PACKAGE, M::NAME), qos)
+            .map_err(|e| RosError::Create {
+                what: "topic",
+                name: full_name.to_string(),
+                reason: format!("{e:?}"),
+            })
+    }
+
+    /// A publisher of `M` on the absolute topic `full_name`.
+    pub fn publisher<M: RosMessage>(
+        &mut self,
+        full_name: &str,
+        qos: QosProfile,
+    ) -> Result<Publisher<M>, RosError> {
+        let topic = self.topic::<M>(full_name, &qos)?;
+        self.node
+            .create_publisher(&topic, Some(qos))
+            .map_err(|e| RosError::Create {
+                what: "publisher",
+                name: full_name.to_string(),
+                reason: format!("{e:?}"),
+            })
+    }
+
+    /// A subscription to `M` on the absolute topic `full_name`.
+    pub fn subscription<M: RosMessage>(
+        &mut self,
+        full_name: &str,
+        qos: QosProfile,
+    ) -> Result<Subscription<M>, RosError> {
+        let topic = self.topic::<M>(full_name, &qos)?;
+        self.node
+            .create_subscription(&topic, Some(qos))
+            .map_err(|e| RosError::Create {
+                what: "subscription",
+                name: full_name.to_string(),
+                reason: format!("{e:?}"),
+            })
+    }
+}

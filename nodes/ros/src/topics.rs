@@ -1,0 +1,56 @@
+//! Topic names: everything of one robot under `/<robot>`, each module under `/<robot>/<module>`,
+//! so that launching one more module node is all a reconfiguration needs.
+
+/// `/<robot>/<module>/joint_states`: `sensor_msgs/JointState`, the module's joints.
+pub fn joint_states(robot: &str, module: &str) -> String {
+    format!("/{robot}/{module}/joint_states")
+}
+
+/// `/<robot>/<module>/joint_increments`: `std_msgs/Float64MultiArray`, one increment [rad] per
+/// joint in the module's joint order.
+pub fn joint_increments(robot: &str, module: &str) -> String {
+    format!("/{robot}/{module}/joint_increments")
+}
+
+/// `/<robot>/<module>/joint_set`: `sensor_msgs/JointState`, absolute targets by joint name (the
+/// form MoonBot's Motion Stack uses).
+pub fn joint_set(robot: &str, module: &str) -> String {
+    format!("/{robot}/{module}/joint_set")
+}
+
+/// `/<robot>/<module>/wheel_velocity`: `std_msgs/Float64` [rad/s] for both wheels.
+pub fn wheel_velocity(robot: &str, module: &str) -> String {
+    format!("/{robot}/{module}/wheel_velocity")
+}
+
+/// `/<robot>/<module>/goal_pose`: `geometry_msgs/PoseStamped` in the module's base frame.
+pub fn goal_pose(robot: &str, module: &str) -> String {
+    format!("/{robot}/{module}/goal_pose")
+}
+
+/// `/<robot>/odom`: `nav_msgs/Odometry` of the base.
+pub fn odom(robot: &str) -> String {
+    format!("/{robot}/odom")
+}
+
+/// `/<robot>/imu`: `sensor_msgs/Imu` of the base.
+pub fn imu(robot: &str) -> String {
+    format!("/{robot}/imu")
+}
+
+/// `/<robot>/robot_description`: `std_msgs/String`, the URDF, latched.
+pub fn robot_description(robot: &str) -> String {
+    format!("/{robot}/robot_description")
+}
+
+/// `/tf`: `tf2_msgs/TFMessage`.
+pub const TF: &str = "/tf";
+/// `/clock`: `rosgraph_msgs/Clock`, simulated time.
+pub const CLOCK: &str = "/clock";
+/// `/diagnostics`: `diagnostic_msgs/DiagnosticArray`.
+pub const DIAGNOSTICS: &str = "/diagnostics";
+
+/// The fixed frame that odometry and `/tf` roots are expressed in, per robot: `<robot>/odom`.
+pub fn odom_frame(robot: &str) -> String {
+    format!("{robot}/odom")
+}

@@ -1,0 +1,488 @@
+//! Command intake: what arrives on each module's command topics, validated and turned into
+//! servo commands. Pure: no ROS, no clock; the node passes in sim time.
+
+use std::collections::BTreeMap;
+
+use kumi_model::{ActuatorMode, RobotModel};
+
+/// Why a command was refused. Each kind is counted in `/diagnostics`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Rejection {
+    NonFinite {
+        module: String,
+    },
+    WrongLength {
+        module: String,
+        expected: usize,
+        got: usize,
+    },
+    UnknownJoint {
+        module: String,
+        joint: String,
+    },
+    /// A command for a module that has no joints of that kind (increments to a wheel module).
+    WrongModule {
+        module: String,
+        what: &'static str,
+    },
+}
+
+impl Rejection {
+    /// The counter this rejection increments.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Rejection::NonFinite { .. } => "non_finite",
+            Rejection::WrongLength { .. } => "wrong_length",
+            Rejection::UnknownJoint { .. } => "unknown_joint",
+            Rejection::WrongModule { .. } => "wrong_module",
+        }
+    }
+}
+
+impl std::fmt::Display for Rejection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Rejection::NonFinite { module } => write!(
+                f,
+                "{module}: rejected a command with NaN or infinite values"
+            ),
+            Rejection::WrongLength {
+                module,
+                expected,
+                got,
+            } => {
+                write!(
+                    f,
+                    "{module}: rejected a command of {got} values, expected {expected}"
+                )
+            }
+            Rejection::UnknownJoint { module, joint } => write!(
+                f,
+                "{module}: rejected a command for unknown joint `{joint}`"
+            ),
+            Rejection::WrongModule { module, what } => write!(
+                f,
+                "{module}: rejected a {what} command: this module has no such joints"
+            ),
+        }
+    }
+}
+
+/// One module's command state.
+#[derive(Debug, Clone)]
+struct ModuleState {
+    /// Position joints' names (prefixed, `arm0/joint1`), in order.
+    position_joints: Vec<String>,
+    has_wheels: bool,
+    /// Position targets [rad] the module is following.
+    targets: Vec<f64>,
+    /// Wheel velocity [rad/s].
+    wheel_velocity: f64,
+    /// Sim time [s] of the last accepted command; `None` before any.
+    last_command_s: Option<f64>,
+    /// The module is holding because its commands stopped.
+    holding: bool,
+}
+
+/// What each module is commanded to do, and the rules for changing it.
+#[derive(Debug, Clone)]
+pub struct Commands {
+    modules: BTreeMap<String, ModuleState>,
+    /// Commands older than this [s of sim time] make the module hold its position.
+    stale_after_s: f64,
+}
+
+/// A change for the simulator, produced by [`Commands`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum Update {
+    PositionTargets { module: String, targets: Vec<f64> },
+    WheelVelocity { module: String, velocity: f64 },
+}
+
+impl Commands {
+    /// Every module starts holding `home` (positions per module, in model order).
+    pub fn new(
+        model: &RobotModel,
+        initial_positions: &BTreeMap<String, Vec<f64>>,
+        stale_after_s: f64,
+    ) -> Self {
+        let modules = model
+            .modules
+            .iter()
+            .map(|m| {
+                let position_joints: Vec<String> =
+                    m.position_joints().map(|a| a.joint.clone()).collect();
+                let targets = initial_positions
+                    .get(&m.name)
+                    .cloned()
+                    .unwrap_or_else(|| vec![0.0; position_joints.len()]);
+                (
+                    m.name.clone(),
+                    ModuleState {
+                        has_wheels: m.actuators.iter().any(|a| a.mode == ActuatorMode::Velocity),
+                        position_joints,
+                        targets,
+                        wheel_velocity: 0.0,
+                        last_command_s: None,
+                        holding: true,
+                    },
+                )
+            })
+            .collect();
+        Self {
+            modules,
+            stale_after_s,
+        }
+    }
+
+    fn module(&mut self, module: &str, what: &'static str) -> Result<&mut ModuleState, Rejection> {
+        self.modules
+            .get_mut(module)
+            .ok_or_else(|| Rejection::WrongModule {
+                module: module.to_string(),
+                what,
+            })
+    }
+
+    /// Joint increments [rad], one per position joint in order: targets move by that much.
+    pub fn increments(
+        &mut self,
+        module: &str,
+        increments: &[f64],
+        now_s: f64,
+    ) -> Result<Update, Rejection> {
+        let state = self.module(module, "joint increments")?;
+        if state.position_joints.is_empty() {
+            return Err(Rejection::WrongModule {
+                module: module.to_string(),
+                what: "joint increments",
+            });
+        }
+        if increments.len() != state.targets.len() {
+            return Err(Rejection::WrongLength {
+                module: module.to_string(),
+                expected: state.targets.len(),
+                got: increments.len(),
+            });
+        }
+        if increments.iter().any(|x| !x.is_finite()) {
+            return Err(Rejection::NonFinite {
+                module: module.to_string(),
+            });
+        }
+        for (t, d) in state.targets.iter_mut().zip(increments) {
+            *t += d;
+        }
+        state.last_command_s = Some(now_s);
+        state.holding = false;
+        Ok(Update::PositionTargets {
+            module: module.to_string(),
+            targets: state.targets.clone(),
+        })
+    }
+
+    /// Absolute targets [rad] by joint name (`joint3` or `arm0/joint3`); joints not named keep
+    /// their targets. The whole message is refused if any name is unknown or any value is bad.
+    pub fn joint_set(
+        &mut self,
+        module: &str,
+        names: &[String],
+        positions: &[f64],
+        now_s: f64,
+    ) -> Result<Update, Rejection> {
+        let state = self.module(module, "joint set")?;
+        if state.position_joints.is_empty() {
+            return Err(Rejection::WrongModule {
+                module: module.to_string(),
+                what: "joint set",
+            });
+        }
+        if names.len() != positions.len() || names.is_empty() {
+            return Err(Rejection::WrongLength {
+                module: module.to_string(),
+                expected: names.len(),
+                got: positions.len(),
+            });
+        }
+        if positions.iter().any(|x| !x.is_finite()) {
+            return Err(Rejection::NonFinite {
+                module: module.to_string(),
+            });
+        }
+        let prefix = format!("{module}/");
+        let mut indices = Vec::with_capacity(names.len());
+        for name in names {
+            let full = if name.starts_with(&prefix) {
+                name.clone()
+            } else {
+                format!("{prefix}{name}")
+            };
+            let i = state
+                .position_joints
+                .iter()
+                .position(|j| *j == full)
+                .ok_or_else(|| Rejection::UnknownJoint {
+                    module: module.to_string(),
+                    joint: name.clone(),
+                })?;
+            indices.push(i);
+        }
+        for (i, q) in indices.into_iter().zip(positions) {
+            state.targets[i] = *q;
+        }
+        state.last_command_s = Some(now_s);
+        state.holding = false;
+        Ok(Update::PositionTargets {
+            module: module.to_string(),
+            targets: state.targets.clone(),
+        })
+    }
+
+    /// A wheel velocity [rad/s] for both wheels of a wheel module.
+    pub fn wheel_velocity(
+        &mut self,
+        module: &str,
+        velocity: f64,
+        now_s: f64,
+    ) -> Result<Update, Rejection> {
+        let state = self.module(module, "wheel velocity")?;
+        if !state.has_wheels {
+            return Err(Rejection::WrongModule {
+                module: module.to_string(),
+                what: "wheel velocity",
+            });
+        }
+        if !velocity.is_finite() {
+            return Err(Rejection::NonFinite {
+                module: module.to_string(),
+            });
+        }
+        state.wheel_velocity = velocity;
+        state.last_command_s = Some(now_s);
+        state.holding = false;
+        Ok(Update::WheelVelocity {
+            module: module.to_string(),
+            velocity,
+        })
+    }
+
+    /// Records the targets the simulator actually applied (after clamping to joint limits), so
+    /// that increments build on reachable targets.
+    pub fn set_applied_targets(&mut self, module: &str, targets: &[f64]) {
+        if let Some(state) = self.modules.get_mut(module) {
+            state.targets = targets.to_vec();
+        }
+    }
+
+    /// Modules whose commands stopped `stale_after_s` ago start holding: position targets go
+    /// to where the joints are now, wheels stop. Returns the updates, once per module.
+    pub fn expire(&mut self, now_s: f64, positions: &BTreeMap<String, Vec<f64>>) -> Vec<Update> {
+        let mut updates = Vec::new();
+        for (name, state) in &mut self.modules {
+            let Some(last) = state.last_command_s else {
+                continue;
+            };
+            if state.holding || now_s - last < self.stale_after_s {
+                continue;
+            }
+            state.holding = true;
+            if !state.position_joints.is_empty() {
+                if let Some(q) = positions.get(name) {
+                    state.targets = q.clone();
+                }
+                updates.push(Update::PositionTargets {
+                    module: name.clone(),
+                    targets: state.targets.clone(),
+                });
+            }
+            if state.has_wheels {
+                state.wheel_velocity = 0.0;
+                updates.push(Update::WheelVelocity {
+                    module: name.clone(),
+                    velocity: 0.0,
+                });
+            }
+        }
+        updates
+    }
+
+    /// Whether a module is holding (no command yet, or its commands went stale).
+    pub fn is_holding(&self, module: &str) -> bool {
+        self.modules.get(module).is_none_or(|s| s.holding)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kumi_model::{assemble, load_morphology, ModuleLibrary};
+
+    fn commands() -> Commands {
+        let library = ModuleLibrary::shipped();
+        let model = assemble(&load_morphology("dragon", &library).unwrap(), &library);
+        Commands::new(&model, &BTreeMap::new(), 0.5)
+    }
+
+    #[test]
+    fn increments_accumulate_on_the_targets() {
+        let mut c = commands();
+        c.increments("arm0", &[0.1; 7], 0.0).unwrap();
+        let u = c
+            .increments("arm0", &[0.05, 0.0, 0.0, 0.0, 0.0, 0.0, -0.1], 0.1)
+            .unwrap();
+        assert_eq!(
+            u,
+            Update::PositionTargets {
+                module: "arm0".into(),
+                targets: vec![0.15000000000000002, 0.1, 0.1, 0.1, 0.1, 0.1, 0.0]
+            }
+        );
+    }
+
+    #[test]
+    fn bad_increments_are_rejected_and_change_nothing() {
+        let mut c = commands();
+        assert_eq!(
+            c.increments("arm0", &[0.1; 6], 0.0).unwrap_err().kind(),
+            "wrong_length"
+        );
+        assert_eq!(
+            c.increments("arm0", &[f64::NAN; 7], 0.0)
+                .unwrap_err()
+                .kind(),
+            "non_finite"
+        );
+        assert_eq!(
+            c.increments("front_wheel", &[0.0; 7], 0.0)
+                .unwrap_err()
+                .kind(),
+            "wrong_module"
+        );
+        assert_eq!(
+            c.increments("nobody", &[0.0; 7], 0.0).unwrap_err().kind(),
+            "wrong_module"
+        );
+        assert!(
+            c.is_holding("arm0"),
+            "rejected commands do not count as commands"
+        );
+        let u = c.increments("arm0", &[0.0; 7], 0.0).unwrap();
+        assert_eq!(
+            u,
+            Update::PositionTargets {
+                module: "arm0".into(),
+                targets: vec![0.0; 7]
+            }
+        );
+    }
+
+    #[test]
+    fn joint_set_by_short_or_full_name() {
+        let mut c = commands();
+        let u = c
+            .joint_set(
+                "leg0",
+                &["joint2".into(), "leg0/joint7".into()],
+                &[0.3, -0.2],
+                0.0,
+            )
+            .unwrap();
+        assert_eq!(
+            u,
+            Update::PositionTargets {
+                module: "leg0".into(),
+                targets: vec![0.0, 0.3, 0.0, 0.0, 0.0, 0.0, -0.2]
+            }
+        );
+        let err = c
+            .joint_set("leg0", &["joint9".into()], &[0.1], 0.0)
+            .unwrap_err();
+        assert_eq!(
+            err,
+            Rejection::UnknownJoint {
+                module: "leg0".into(),
+                joint: "joint9".into()
+            }
+        );
+        assert_eq!(
+            c.joint_set("leg0", &["joint1".into()], &[], 0.0)
+                .unwrap_err()
+                .kind(),
+            "wrong_length"
+        );
+        assert_eq!(
+            c.joint_set("leg0", &["joint1".into()], &[f64::INFINITY], 0.0)
+                .unwrap_err()
+                .kind(),
+            "non_finite"
+        );
+        assert_eq!(
+            c.joint_set("leg0", &["arm0/joint1".into()], &[0.1], 0.0)
+                .unwrap_err()
+                .kind(),
+            "unknown_joint"
+        );
+    }
+
+    #[test]
+    fn wheel_velocity_only_for_wheel_modules() {
+        let mut c = commands();
+        assert_eq!(
+            c.wheel_velocity("rear_wheel", 2.0, 0.0).unwrap(),
+            Update::WheelVelocity {
+                module: "rear_wheel".into(),
+                velocity: 2.0
+            }
+        );
+        assert_eq!(
+            c.wheel_velocity("arm0", 2.0, 0.0).unwrap_err().kind(),
+            "wrong_module"
+        );
+        assert_eq!(
+            c.wheel_velocity("rear_wheel", f64::NAN, 0.0)
+                .unwrap_err()
+                .kind(),
+            "non_finite"
+        );
+    }
+
+    #[test]
+    fn stale_commands_hold_position_once() {
+        let mut c = commands();
+        c.increments("arm0", &[0.5; 7], 1.0).unwrap();
+        c.wheel_velocity("front_wheel", 3.0, 1.0).unwrap();
+        let measured: BTreeMap<String, Vec<f64>> = [("arm0".to_string(), vec![0.2; 7])].into();
+        assert!(
+            c.expire(1.4, &measured).is_empty(),
+            "0.4 s is not stale yet"
+        );
+        let updates = c.expire(1.5, &measured);
+        assert_eq!(
+            updates,
+            vec![
+                Update::PositionTargets {
+                    module: "arm0".into(),
+                    targets: vec![0.2; 7]
+                },
+                Update::WheelVelocity {
+                    module: "front_wheel".into(),
+                    velocity: 0.0
+                },
+            ]
+        );
+        assert!(c.is_holding("arm0") && c.is_holding("front_wheel"));
+        assert!(
+            c.expire(3.0, &measured).is_empty(),
+            "a holding module is not expired again"
+        );
+        // New increments build on the held position.
+        let u = c.increments("arm0", &[0.1; 7], 3.1).unwrap();
+        assert_eq!(
+            u,
+            Update::PositionTargets {
+                module: "arm0".into(),
+                targets: vec![0.30000000000000004; 7]
+            }
+        );
+    }
+}

@@ -1,0 +1,520 @@
+//! The bridge's event loop.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use kumi_model::kinematics::KinematicTree;
+use kumi_model::{ActuatorMode, RobotModel};
+use kumi_msgs::builtin_interfaces::Time;
+use kumi_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
+use kumi_msgs::rosgraph_msgs::Clock;
+use kumi_msgs::sensor_msgs::JointState;
+use kumi_msgs::std_msgs::{Float64, Float64MultiArray, Header, StringMsg};
+use kumi_ros::{qos, topics, RateLimited, RosError, RosNode};
+use kumi_sim::{SimConfig, SimError, World};
+use nalgebra::Vector3;
+use ros2_client::{Publisher, Subscription};
+use tracing::{info, warn};
+
+use crate::commands::{Commands, Rejection, Update};
+use crate::lockstep::Lockstep;
+use crate::state;
+
+/// How the bridge paces the simulation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Mode {
+    /// Physics paced to the wall clock, `factor` times real time.
+    RealTime { factor: f64 },
+    /// One control step when every commanded module has sent its command for the tick, or when
+    /// `timeout` passes without them; as fast as the consumers allow. Before the first command
+    /// (and once every controller has gone quiet) simulated time stands still and the current
+    /// state is republished every `timeout`, so a run always starts from the same state.
+    Lockstep { timeout: Duration },
+}
+
+/// Everything the bridge needs to run.
+#[derive(Debug, Clone)]
+pub struct BridgeConfig {
+    pub model: Arc<RobotModel>,
+    /// The robot name: the namespace of every topic.
+    pub robot: String,
+    /// ROS domain id.
+    pub domain_id: u16,
+    pub mode: Mode,
+    /// Commands older than this [s of sim time] make a module hold its position (wheels stop).
+    pub stale_after_s: f64,
+    /// How long to listen for another bridge of the same robot before starting.
+    pub duplicate_check: Duration,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    #[error(transparent)]
+    Ros(#[from] RosError),
+    #[error("another sim bridge already runs robot `{robot}` on ROS domain {domain} (it publishes {topic}); give this one another name with --robot")]
+    Duplicate {
+        robot: String,
+        domain: u16,
+        topic: String,
+    },
+    #[error("invalid configuration: {0}")]
+    BadConfig(String),
+}
+
+/// Subscriptions of one module.
+struct ModuleInputs {
+    name: String,
+    increments: Option<Subscription<Float64MultiArray>>,
+    joint_set: Option<Subscription<JointState>>,
+    wheel_velocity: Option<Subscription<Float64>>,
+}
+
+/// An incoming message, taken off its subscription.
+enum Incoming {
+    Increments(Float64MultiArray),
+    JointSet(JointState),
+    WheelVelocity(f64),
+}
+
+/// Rejection and clamp counters, reported on `/diagnostics`.
+#[derive(Default)]
+struct Counters {
+    by_kind: BTreeMap<&'static str, u64>,
+    clamped: u64,
+    stale_holds: u64,
+}
+
+/// The ROS side of the bridge: publishers, subscriptions.
+struct Io {
+    joint_states: Vec<(String, Publisher<JointState>)>,
+    odom: Publisher<kumi_msgs::nav_msgs::Odometry>,
+    imu: Publisher<kumi_msgs::sensor_msgs::Imu>,
+    tf: Publisher<kumi_msgs::tf2_msgs::TFMessage>,
+    clock: Publisher<Clock>,
+    diagnostics: Publisher<DiagnosticArray>,
+    inputs: Vec<ModuleInputs>,
+    // Kept alive: the description is latched.
+    _description: Publisher<StringMsg>,
+}
+
+fn check_config(config: &BridgeConfig) -> Result<(), BridgeError> {
+    if let Mode::RealTime { factor } = config.mode {
+        if !(factor.is_finite() && factor > 0.0) {
+            return Err(BridgeError::BadConfig(format!(
+                "--realtime-factor must be positive, got {factor}"
+            )));
+        }
+    }
+    if config.robot.is_empty()
+        || !config
+            .robot
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_')
+        || config.robot.starts_with(|c: char| c.is_ascii_digit())
+    {
+        return Err(BridgeError::BadConfig(format!(
+            "robot name `{}` must be a valid ROS name: letters, digits and `_`, not starting with a digit",
+            config.robot
+        )));
+    }
+    Ok(())
+}
+
+/// Refuses to start when another bridge already publishes this robot's description.
+fn refuse_duplicates(node: &RosNode, config: &BridgeConfig) -> Result<(), BridgeError> {
+    let topic = topics::robot_description(&config.robot);
+    let deadline = Instant::now() + config.duplicate_check;
+    while Instant::now() < deadline {
+        if node.remote_publishers(&topic) > 0 {
+            return Err(BridgeError::Duplicate {
+                robot: config.robot.clone(),
+                domain: node.domain_id(),
+                topic,
+            });
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Ok(())
+}
+
+fn open_io(node: &mut RosNode, config: &BridgeConfig) -> Result<Io, BridgeError> {
+    let robot = &config.robot;
+    let mut joint_states = Vec::new();
+    let mut inputs = Vec::new();
+    for m in &config.model.modules {
+        if m.actuators.is_empty() {
+            continue;
+        }
+        joint_states.push((
+            m.name.clone(),
+            node.publisher(&topics::joint_states(robot, &m.name), qos::default())?,
+        ));
+        let has_position = m.actuators.iter().any(|a| a.mode == ActuatorMode::Position);
+        let has_wheels = m.actuators.iter().any(|a| a.mode == ActuatorMode::Velocity);
+        inputs.push(ModuleInputs {
+            name: m.name.clone(),
+            increments: if has_position {
+                Some(node.subscription(&topics::joint_increments(robot, &m.name), qos::default())?)
+            } else {
+                None
+            },
+            joint_set: if has_position {
+                Some(node.subscription(&topics::joint_set(robot, &m.name), qos::default())?)
+            } else {
+                None
+            },
+            wheel_velocity: if has_wheels {
+                Some(node.subscription(&topics::wheel_velocity(robot, &m.name), qos::default())?)
+            } else {
+                None
+            },
+        });
+    }
+    let description =
+        node.publisher::<StringMsg>(&topics::robot_description(robot), qos::latched())?;
+    // Latched: published once, kept for late joiners.
+    if let Err(e) = description.publish(StringMsg {
+        data: config.model.urdf_xml(),
+    }) {
+        warn!("could not publish the robot description: {e:?}");
+    }
+    Ok(Io {
+        joint_states,
+        odom: node.publisher(&topics::odom(robot), qos::default())?,
+        imu: node.publisher(&topics::imu(robot), qos::default())?,
+        tf: node.publisher(topics::TF, qos::default())?,
+        clock: node.publisher(topics::CLOCK, qos::default())?,
+        diagnostics: node.publisher(topics::DIAGNOSTICS, qos::default())?,
+        inputs,
+        _description: description,
+    })
+}
+
+/// Takes every waiting message of one module, oldest first.
+fn drain(inputs: &ModuleInputs, malformed: &mut u64) -> Vec<Incoming> {
+    let mut out = Vec::new();
+    let mut take = |f: &mut dyn FnMut() -> Option<Result<Incoming, ()>>| {
+        while let Some(r) = f() {
+            match r {
+                Ok(m) => out.push(m),
+                Err(()) => *malformed += 1,
+            }
+        }
+    };
+    if let Some(sub) = &inputs.increments {
+        take(&mut || match sub.take() {
+            Ok(Some((m, _))) => Some(Ok(Incoming::Increments(m))),
+            Ok(None) => None,
+            Err(_) => Some(Err(())),
+        });
+    }
+    if let Some(sub) = &inputs.joint_set {
+        take(&mut || match sub.take() {
+            Ok(Some((m, _))) => Some(Ok(Incoming::JointSet(m))),
+            Ok(None) => None,
+            Err(_) => Some(Err(())),
+        });
+    }
+    if let Some(sub) = &inputs.wheel_velocity {
+        take(&mut || match sub.take() {
+            Ok(Some((m, _))) => Some(Ok(Incoming::WheelVelocity(m.data))),
+            Ok(None) => None,
+            Err(_) => Some(Err(())),
+        });
+    }
+    out
+}
+
+/// Applies a validated update to the world; returns whether any value was clamped.
+fn apply(world: &mut World, commands: &mut Commands, update: &Update) -> Result<bool, SimError> {
+    match update {
+        Update::PositionTargets { module, targets } => {
+            world.set_position_targets(module, targets)?;
+            let range = world.module_range(module)?;
+            let applied: Vec<f64> = world.commands()[range].to_vec();
+            let clamped = applied != *targets;
+            commands.set_applied_targets(module, &applied);
+            Ok(clamped)
+        }
+        Update::WheelVelocity { module, velocity } => {
+            world.set_wheel_velocity(module, *velocity)?;
+            let range = world.module_range(module)?;
+            Ok(world.commands()[range.start] != *velocity)
+        }
+    }
+}
+
+fn module_positions(world: &World, model: &RobotModel) -> BTreeMap<String, Vec<f64>> {
+    let q = world.joint_positions();
+    model
+        .modules
+        .iter()
+        .filter_map(|m| {
+            let range = world.module_range(&m.name).ok()?;
+            let positions: Vec<f64> = range
+                .zip(&m.actuators)
+                .filter(|(_, a)| a.mode == ActuatorMode::Position)
+                .map(|(i, _)| q[i])
+                .collect();
+            Some((m.name.clone(), positions))
+        })
+        .collect()
+}
+
+/// Runs the bridge until `shutdown` is set.
+pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), BridgeError> {
+    check_config(&config)?;
+    let model = config.model.clone();
+    let mut world = World::new(model.clone(), SimConfig::for_model(&model))?;
+    let tree =
+        KinematicTree::new(&model.urdf).map_err(|e| BridgeError::BadConfig(e.to_string()))?;
+    let control_dt = 1.0 / world.config().control_hz;
+
+    // No ros2-client spinner: the node needs none to be seen in the ROS graph, and its
+    // spinner would subscribe to /clock with the wrong type (builtin_interfaces/Time).
+    let mut node = RosNode::new(
+        &format!("/{}", config.robot),
+        "sim_bridge",
+        config.domain_id,
+    )?;
+
+    refuse_duplicates(&node, &config)?;
+    let io = open_io(&mut node, &config)?;
+    info!(
+        robot = %config.robot,
+        domain = node.domain_id(),
+        mode = ?config.mode,
+        "sim bridge up: {} modules, physics {}",
+        model.modules.len(),
+        world.config().label()
+    );
+
+    let mut commands = Commands::new(
+        &model,
+        &module_positions(&world, &model),
+        config.stale_after_s,
+    );
+    let mut lockstep = Lockstep::default();
+    let mut counters = Counters::default();
+    let mut malformed = 0_u64;
+    let mut reject_log = RateLimited::new(Duration::from_secs(1));
+    let mut steps: u64 = 0;
+    let mut last_linvel = world.base_twist_w().0;
+    let mut accel_w = Vector3::zeros();
+    let start = Instant::now();
+    let mut last_step_at = Instant::now();
+    let mut next_tick = Instant::now();
+    let mut diag_at = Instant::now() + Duration::from_secs(1);
+    let mut diag_window = (Instant::now(), 0_u64);
+
+    let publish_state = |world: &World, steps: u64, accel_w: &Vector3<f64>| {
+        let stamp = Time::from_seconds(steps as f64 * control_dt);
+        let robot = &config.robot;
+        for (module, publisher) in &io.joint_states {
+            if let Some(js) = state::joint_state(world, module, stamp) {
+                let _ = publisher.publish(js);
+            }
+        }
+        let _ = io.odom.publish(state::odometry(world, robot, stamp));
+        let _ = io.imu.publish(state::imu(world, robot, accel_w, stamp));
+        let _ = io.tf.publish(state::transforms(world, &tree, robot, stamp));
+        let _ = io.clock.publish(Clock { clock: stamp });
+    };
+    publish_state(&world, steps, &accel_w);
+
+    while !shutdown.load(Ordering::Relaxed) {
+        let now_s = steps as f64 * control_dt;
+        // Commands.
+        for inputs in &io.inputs {
+            for message in drain(inputs, &mut malformed) {
+                let result = match message {
+                    Incoming::Increments(m) => commands.increments(&inputs.name, &m.data, now_s),
+                    Incoming::JointSet(m) => {
+                        commands.joint_set(&inputs.name, &m.name, &m.position, now_s)
+                    }
+                    Incoming::WheelVelocity(v) => commands.wheel_velocity(&inputs.name, v, now_s),
+                };
+                match result {
+                    Ok(update) => {
+                        counters.clamped += u64::from(apply(&mut world, &mut commands, &update)?);
+                        lockstep.received(&inputs.name);
+                    }
+                    Err(rejection) => {
+                        *counters.by_kind.entry(rejection.kind()).or_default() += 1;
+                        log_rejection(&mut reject_log, &rejection);
+                    }
+                }
+            }
+        }
+
+        // Step when it is time.
+        let due = match config.mode {
+            Mode::RealTime { .. } => Instant::now() >= next_tick,
+            Mode::Lockstep { timeout } => {
+                let timed_out = last_step_at.elapsed() >= timeout;
+                if timed_out && !lockstep.active() {
+                    publish_state(&world, steps, &accel_w);
+                    last_step_at = Instant::now();
+                }
+                lockstep.ready() || (timed_out && lockstep.active())
+            }
+        };
+        if due {
+            for update in commands.expire(now_s, &module_positions(&world, &model)) {
+                counters.stale_holds += 1;
+                warn!(
+                    "{}: commands stopped for {} s of sim time; holding position",
+                    module_of(&update),
+                    config.stale_after_s
+                );
+                apply(&mut world, &mut commands, &update)?;
+            }
+            world.step();
+            steps += 1;
+            let linvel = world.base_twist_w().0;
+            accel_w = (linvel - last_linvel) / control_dt;
+            last_linvel = linvel;
+            lockstep.stepped();
+            last_step_at = Instant::now();
+            publish_state(&world, steps, &accel_w);
+            if let Mode::RealTime { factor } = config.mode {
+                next_tick += Duration::from_secs_f64(control_dt / factor);
+                // Fell far behind (a stall): resynchronise rather than sprint to catch up.
+                if Instant::now() > next_tick + Duration::from_secs(1) {
+                    next_tick = Instant::now();
+                }
+            }
+        }
+
+        if Instant::now() >= diag_at {
+            let (since, steps_then) = diag_window;
+            let rtf = (steps - steps_then) as f64 * control_dt / since.elapsed().as_secs_f64();
+            let _ = io.diagnostics.publish(diagnostics(
+                &config, steps, control_dt, rtf, &counters, malformed, start,
+            ));
+            diag_window = (Instant::now(), steps);
+            diag_at += Duration::from_secs(1);
+        }
+
+        // Wait: real time sleeps to the next tick; lockstep polls for commands.
+        match config.mode {
+            Mode::RealTime { .. } => {
+                let wait = next_tick
+                    .saturating_duration_since(Instant::now())
+                    .min(diag_at.saturating_duration_since(Instant::now()));
+                std::thread::sleep(wait.min(Duration::from_millis(50)));
+            }
+            Mode::Lockstep { .. } => std::thread::sleep(Duration::from_micros(100)),
+        }
+    }
+    info!("sim bridge stopping after {steps} control steps");
+    drop(io);
+    drop(node);
+    Ok(())
+}
+
+fn module_of(update: &Update) -> &str {
+    match update {
+        Update::PositionTargets { module, .. } | Update::WheelVelocity { module, .. } => module,
+    }
+}
+
+fn log_rejection(limiter: &mut RateLimited, rejection: &Rejection) {
+    if let Some(suppressed) = limiter.check(Instant::now()) {
+        if suppressed > 0 {
+            warn!("{rejection} ({suppressed} more rejections in the last second)");
+        } else {
+            warn!("{rejection}");
+        }
+    }
+}
+
+fn diagnostics(
+    config: &BridgeConfig,
+    steps: u64,
+    control_dt: f64,
+    rtf: f64,
+    counters: &Counters,
+    malformed: u64,
+    start: Instant,
+) -> DiagnosticArray {
+    let rejected: u64 = counters.by_kind.values().sum::<u64>() + malformed;
+    let mut values = vec![
+        KeyValue {
+            key: "mode".into(),
+            value: match config.mode {
+                Mode::RealTime { factor } => format!("realtime x{factor}"),
+                Mode::Lockstep { .. } => "lockstep".into(),
+            },
+        },
+        KeyValue {
+            key: "control_steps".into(),
+            value: steps.to_string(),
+        },
+        KeyValue {
+            key: "sim_time_s".into(),
+            value: format!("{:.3}", steps as f64 * control_dt),
+        },
+        KeyValue {
+            key: "wall_time_s".into(),
+            value: format!("{:.3}", start.elapsed().as_secs_f64()),
+        },
+        KeyValue {
+            key: "realtime_factor".into(),
+            value: format!("{rtf:.3}"),
+        },
+        KeyValue {
+            key: "rejected_total".into(),
+            value: rejected.to_string(),
+        },
+        KeyValue {
+            key: "rejected_malformed".into(),
+            value: malformed.to_string(),
+        },
+        KeyValue {
+            key: "clamped".into(),
+            value: counters.clamped.to_string(),
+        },
+        KeyValue {
+            key: "stale_holds".into(),
+            value: counters.stale_holds.to_string(),
+        },
+    ];
+    for kind in [
+        "non_finite",
+        "wrong_length",
+        "unknown_joint",
+        "wrong_module",
+    ] {
+        values.push(KeyValue {
+            key: format!("rejected_{kind}"),
+            value: counters.by_kind.get(kind).copied().unwrap_or(0).to_string(),
+        });
+    }
+    let level = if rejected > 0 {
+        DiagnosticStatus::WARN
+    } else {
+        DiagnosticStatus::OK
+    };
+    DiagnosticArray {
+        header: Header {
+            stamp: Time::from_seconds(steps as f64 * control_dt),
+            frame_id: String::new(),
+        },
+        status: vec![DiagnosticStatus {
+            level,
+            name: format!("kumi sim bridge: {}", config.robot),
+            message: if rejected > 0 {
+                format!("{rejected} commands rejected")
+            } else {
+                "ok".into()
+            },
+            hardware_id: config.robot.clone(),
+            values,
+        }],
+    }
+}

@@ -1,0 +1,103 @@
+//! The simulator's state as ROS messages. Pure functions of the world; the node publishes them.
+
+use kumi_model::kinematics::KinematicTree;
+use kumi_msgs::builtin_interfaces::Time;
+use kumi_msgs::geometry_msgs::{PoseWithCovariance, TransformStamped, Twist, TwistWithCovariance};
+use kumi_msgs::nav_msgs::Odometry;
+use kumi_msgs::sensor_msgs::{Imu, JointState};
+use kumi_msgs::std_msgs::Header;
+use kumi_msgs::tf2_msgs::TFMessage;
+use kumi_ros::geometry;
+use kumi_sim::World;
+use nalgebra::Vector3;
+
+/// Gravity in the world frame [m/s^2].
+const GRAVITY_W: Vector3<f64> = Vector3::new(0.0, 0.0, -9.81);
+
+/// A tf frame id: every frame of a robot is prefixed by its name (`tricycle/arm0/link3`), so
+/// that several robots share one `/tf`.
+pub fn frame(robot: &str, link: &str) -> String {
+    format!("{robot}/{link}")
+}
+
+fn header(stamp: Time, frame_id: String) -> Header {
+    Header { stamp, frame_id }
+}
+
+/// One module's joint state: names (URDF joint names), positions [rad], velocities [rad/s].
+pub fn joint_state(world: &World, module: &str, stamp: Time) -> Option<JointState> {
+    let range = world.module_range(module).ok()?;
+    let names = world.actuator_names();
+    let q = world.joint_positions();
+    let v = world.joint_velocities();
+    Some(JointState {
+        header: header(stamp, String::new()),
+        name: names[range.clone()].iter().map(|s| s.to_string()).collect(),
+        position: q[range.clone()].to_vec(),
+        velocity: v[range].to_vec(),
+        effort: Vec::new(),
+    })
+}
+
+/// Base odometry: pose in `<robot>/odom`, twist in the base frame.
+pub fn odometry(world: &World, robot: &str, stamp: Time) -> Odometry {
+    let base = world.base_pose();
+    let (v_w, w_w) = world.base_twist_w();
+    let r_inv = base.rotation.inverse();
+    Odometry {
+        header: header(stamp, kumi_ros::topics::odom_frame(robot)),
+        child_frame_id: frame(robot, &world.model().base_link),
+        pose: PoseWithCovariance {
+            pose: geometry::pose(&base),
+            covariance: [0.0; 36],
+        },
+        twist: TwistWithCovariance {
+            twist: Twist {
+                linear: geometry::vector3(&(r_inv * v_w)),
+                angular: geometry::vector3(&(r_inv * w_w)),
+            },
+            covariance: [0.0; 36],
+        },
+    }
+}
+
+/// The base IMU: orientation in `<robot>/odom`; angular velocity [rad/s] and specific force
+/// [m/s^2] (acceleration minus gravity: +9.81 up at rest) in the base frame. `accel_w` is the
+/// base's linear acceleration in the world frame.
+pub fn imu(world: &World, robot: &str, accel_w: &Vector3<f64>, stamp: Time) -> Imu {
+    let base = world.base_pose();
+    let (_, w_w) = world.base_twist_w();
+    let r_inv = base.rotation.inverse();
+    Imu {
+        header: header(stamp, frame(robot, &world.model().base_link)),
+        orientation: geometry::quaternion(&base.rotation),
+        orientation_covariance: [0.0; 9],
+        angular_velocity: geometry::vector3(&(r_inv * w_w)),
+        angular_velocity_covariance: [0.0; 9],
+        linear_acceleration: geometry::vector3(&(r_inv * (accel_w - GRAVITY_W))),
+        linear_acceleration_covariance: [0.0; 9],
+    }
+}
+
+/// `/tf` for every link: the base in `<robot>/odom`, then each joint's child in its parent.
+pub fn transforms(world: &World, tree: &KinematicTree, robot: &str, stamp: Time) -> TFMessage {
+    let poses: std::collections::HashMap<String, nalgebra::Isometry3<f64>> =
+        world.body_poses().into_iter().collect();
+    let links = tree.links();
+    let mut transforms = Vec::with_capacity(tree.joints().len() + 1);
+    transforms.push(TransformStamped {
+        header: header(stamp, kumi_ros::topics::odom_frame(robot)),
+        child_frame_id: frame(robot, &links[tree.root()]),
+        transform: geometry::transform(&world.base_pose()),
+    });
+    for j in tree.joints() {
+        let (parent, child) = (&links[j.parent_link], &links[j.child_link]);
+        let relative = poses[parent].inverse() * poses[child];
+        transforms.push(TransformStamped {
+            header: header(stamp, frame(robot, parent)),
+            child_frame_id: frame(robot, child),
+            transform: geometry::transform(&relative),
+        });
+    }
+    TFMessage { transforms }
+}

@@ -1,0 +1,387 @@
+"""rclpy peer for kumi's ROS 2 interop tests: a stock ROS 2 Kilted node (rclpy from PyPI) that
+talks to kumi's nodes. Each subcommand runs one scenario and prints one JSON object on its last
+line of stdout. Every wait has a deadline; the Rust tests also kill this process on timeout.
+
+Run with ROS_DOMAIN_ID set to the domain of the node under test.
+"""
+
+import argparse
+import json
+import math
+import sys
+import time
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import (Point, Pose, PoseStamped, PoseWithCovariance, Quaternion, Transform,
+                               TransformStamped, Twist, TwistWithCovariance, Vector3)
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu, JointState
+from std_msgs.msg import (Bool, Float64, Float64MultiArray, Header, MultiArrayDimension,
+                          MultiArrayLayout, String)
+
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+DEFAULT = 10  # rclpy's default: reliable, volatile, keep last 10
+
+TYPES = {
+    "builtin_interfaces/Time": Time,
+    "std_msgs/Header": Header,
+    "std_msgs/Float64": Float64,
+    "std_msgs/Float64MultiArray": Float64MultiArray,
+    "std_msgs/MultiArrayLayout": MultiArrayLayout,
+    "std_msgs/MultiArrayDimension": MultiArrayDimension,
+    "std_msgs/String": String,
+    "std_msgs/Bool": Bool,
+    "geometry_msgs/Vector3": Vector3,
+    "geometry_msgs/Point": Point,
+    "geometry_msgs/Quaternion": Quaternion,
+    "geometry_msgs/Pose": Pose,
+    "geometry_msgs/PoseStamped": PoseStamped,
+    "geometry_msgs/Twist": Twist,
+    "geometry_msgs/Transform": Transform,
+    "geometry_msgs/TransformStamped": TransformStamped,
+    "geometry_msgs/PoseWithCovariance": PoseWithCovariance,
+    "geometry_msgs/TwistWithCovariance": TwistWithCovariance,
+    "sensor_msgs/JointState": JointState,
+    "sensor_msgs/Imu": Imu,
+    "nav_msgs/Odometry": Odometry,
+    "rosgraph_msgs/Clock": Clock,
+    "diagnostic_msgs/KeyValue": KeyValue,
+    "diagnostic_msgs/DiagnosticStatus": DiagnosticStatus,
+    "diagnostic_msgs/DiagnosticArray": DiagnosticArray,
+}
+
+
+def to_dict(msg):
+    """A message as plain JSON-able values, field by field."""
+    if hasattr(msg, "get_fields_and_field_types"):
+        return {f: to_dict(getattr(msg, f)) for f in msg.get_fields_and_field_types()}
+    if isinstance(msg, (list, tuple)) or type(msg).__name__ == "ndarray" or type(msg).__name__ == "array":
+        return [to_dict(x) for x in msg]
+    if isinstance(msg, bytes):
+        return list(msg)
+    return msg
+
+
+def from_dict(cls, values):
+    """A message of type `cls` with the fields in `values` (nested dicts and lists)."""
+    msg = cls()
+    for field, ftype in msg.get_fields_and_field_types().items():
+        if field not in values:
+            continue
+        v = values[field]
+        current = getattr(msg, field)
+        if hasattr(current, "get_fields_and_field_types"):
+            setattr(msg, field, from_dict(type(current), v))
+        elif ftype.startswith("sequence<") and "/" in ftype:
+            inner = ftype[len("sequence<"):-1]
+            pkg, name = inner.split("/")
+            setattr(msg, field, [from_dict(TYPES[f"{pkg}/{name}"], x) for x in v])
+        elif ftype == "octet" or ftype == "uint8" and isinstance(v, int):
+            setattr(msg, field, v)
+        else:
+            setattr(msg, field, v)
+    return msg
+
+
+class Peer(Node):
+    def __init__(self):
+        super().__init__("kumi_test_peer")
+        self.latest = {}
+
+    def listen(self, cls, topic, key=None, qos=DEFAULT):
+        key = key or topic
+
+        def store(m):
+            self.latest[key] = m
+            self.latest.setdefault(key + "#count", 0)
+            self.latest[key + "#count"] += 1
+            self.latest.setdefault(key + "#first", m)
+
+        return self.create_subscription(cls, topic, store, qos)
+
+    def spin_until(self, done, timeout):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            rclpy.spin_once(self, timeout_sec=0.02)
+            if done():
+                return True
+        return False
+
+    def wait_for_new(self, key, timeout, predicate=lambda m: True):
+        before = self.latest.get(key + "#count", 0)
+        ok = self.spin_until(lambda: self.latest.get(key + "#count", 0) > before and predicate(self.latest[key]), timeout)
+        return self.latest.get(key) if ok else None
+
+
+def stamp(msg):
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def diag_values(peer, timeout=4.0):
+    msg = peer.wait_for_new("/diagnostics", timeout)
+    if msg is None:
+        return None
+    return {kv.key: kv.value for kv in msg.status[0].values} | {"_level": int.from_bytes(msg.status[0].level, "little") if isinstance(msg.status[0].level, bytes) else int(msg.status[0].level), "_message": msg.status[0].message}
+
+
+def cmd_observe(args, peer):
+    arms, wheels = args.arms.split(","), [w for w in args.wheels.split(",") if w]
+    r = args.robot
+    for m in arms + wheels:
+        peer.listen(JointState, f"/{r}/{m}/joint_states")
+    peer.listen(Odometry, f"/{r}/odom")
+    peer.listen(Imu, f"/{r}/imu")
+    peer.listen(Clock, "/clock")
+    peer.listen(DiagnosticArray, "/diagnostics")
+    peer.listen(String, f"/{r}/robot_description", qos=LATCHED)
+    wanted = [f"/{r}/{m}/joint_states" for m in arms + wheels] + [f"/{r}/odom", f"/{r}/imu", "/clock", "/diagnostics", f"/{r}/robot_description"]
+    peer.spin_until(lambda: all(k in peer.latest for k in wanted), args.timeout)
+    out = {"received": {k: k in peer.latest for k in wanted}}
+    out["nodes"] = [f"{ns.rstrip('/')}/{n}" for n, ns in peer.get_node_names_and_namespaces()]
+    out["topic_types"] = {t: ts for t, ts in peer.get_topic_names_and_types()}
+    out["joint_states"] = {}
+    for m in arms + wheels:
+        js = peer.latest.get(f"/{r}/{m}/joint_states")
+        if js:
+            out["joint_states"][m] = {"name": list(js.name), "position": list(js.position), "velocity": list(js.velocity)}
+    odom = peer.latest.get(f"/{r}/odom")
+    if odom:
+        p = odom.pose.pose.position
+        q = odom.pose.pose.orientation
+        out["odom"] = {"frame": odom.header.frame_id, "child": odom.child_frame_id, "position": [p.x, p.y, p.z], "quat_norm": math.sqrt(q.x**2 + q.y**2 + q.z**2 + q.w**2), "covariance_len": len(odom.pose.covariance)}
+    imu = peer.latest.get(f"/{r}/imu")
+    if imu:
+        a = imu.linear_acceleration
+        out["imu"] = {"frame": imu.header.frame_id, "accel": [a.x, a.y, a.z]}
+    clock = peer.latest.get("/clock")
+    if clock:
+        out["clock_s"] = clock.clock.sec + clock.clock.nanosec * 1e-9
+    desc = peer.latest.get(f"/{r}/robot_description")
+    out["description_chars"] = len(desc.data) if desc else 0
+    out["description_head"] = desc.data[:200] if desc else ""
+    d = peer.latest.get("/diagnostics")
+    if d:
+        out["diagnostics_name"] = d.status[0].name
+    return out
+
+
+def cmd_drive(args, peer):
+    r = args.robot
+    js_topic = f"/{r}/{args.arm}/joint_states"
+    peer.listen(JointState, js_topic)
+    peer.listen(Odometry, f"/{r}/odom")
+    inc = peer.create_publisher(Float64MultiArray, f"/{r}/{args.arm}/joint_increments", DEFAULT)
+    wheel = peer.create_publisher(Float64, f"/{r}/{args.wheel}/wheel_velocity", DEFAULT)
+    out = {}
+    if not peer.spin_until(lambda: js_topic in peer.latest and f"/{r}/odom" in peer.latest, args.timeout):
+        return {"error": "no joint states or odometry"}
+    # Wait until a subscriber for our increments exists (discovery), then send one increment.
+    peer.spin_until(lambda: inc.get_subscription_count() > 0 and wheel.get_subscription_count() > 0, args.timeout)
+    q0 = list(peer.latest[js_topic].position)
+    msg = Float64MultiArray()
+    msg.data = [args.increment if i == args.joint else 0.0 for i in range(len(q0))]
+    inc.publish(msg)
+    peer.spin_until(lambda: False, 1.0)
+    out["q0"] = q0
+    out["q1"] = list(peer.latest[js_topic].position)
+    # Wheels: keep commanding (commands older than 0.5 s are dropped), watch the base move.
+    x0 = peer.latest[f"/{r}/odom"].pose.pose.position
+    deadline = time.monotonic() + args.drive_seconds
+    while time.monotonic() < deadline:
+        wheel.publish(Float64(data=args.wheel_velocity))
+        peer.spin_until(lambda: False, 0.1)
+    x1 = peer.latest[f"/{r}/odom"].pose.pose.position
+    out["base_moved_m"] = math.dist([x0.x, x0.y], [x1.x, x1.y])
+    return out
+
+
+def cmd_late(args, peer):
+    peer.listen(String, f"/{args.robot}/robot_description", qos=LATCHED)
+    peer.spin_until(lambda: f"/{args.robot}/robot_description" in peer.latest, args.timeout)
+    d = peer.latest.get(f"/{args.robot}/robot_description")
+    return {"description_chars": len(d.data) if d else 0, "starts_with": d.data[:40] if d else ""}
+
+
+def cmd_roundtrip(args, peer):
+    samples = json.load(open(args.samples))
+    pubs, echoes, got = {}, {}, {}
+    for tname, values in samples.items():
+        cls = TYPES[tname]
+        key = tname.replace("/", "_")
+        pubs[tname] = (peer.create_publisher(cls, f"/kumi_rt/py2rs/{key}", DEFAULT), from_dict(cls, values))
+        echoes[tname] = peer.create_publisher(cls, f"/kumi_rt/py_echo/{key}", DEFAULT)
+
+        def on(m, tname=tname):
+            got[tname] = to_dict(m)
+            echoes[tname].publish(m)
+
+        peer.create_subscription(cls, f"/kumi_rt/rs2py/{key}", on, DEFAULT)
+    deadline = time.monotonic() + args.timeout
+    while time.monotonic() < deadline and len(got) < len(samples):
+        for pub, msg in pubs.values():
+            pub.publish(msg)
+        peer.spin_until(lambda: False, 0.1)
+    # Keep publishing and echoing a little longer so the Rust side sees everything.
+    linger = time.monotonic() + args.linger
+    while time.monotonic() < linger:
+        for pub, msg in pubs.values():
+            pub.publish(msg)
+        peer.spin_until(lambda: False, 0.1)
+    return {"received_from_rust": {t: got.get(t) for t in samples}, "equal": {t: got.get(t) == json.loads(json.dumps(samples[t])) for t in samples}}
+
+
+def controller_increment(k, j, seed):
+    """The deterministic command sequence of the lockstep test [rad]."""
+    return 0.02 * math.sin(0.1 * k * (j + 1) + seed)
+
+
+def cmd_lockstep(args, peer):
+    r = args.robot
+    js_topic = f"/{r}/{args.arm}/joint_states"
+    peer.listen(JointState, js_topic)
+    inc = peer.create_publisher(Float64MultiArray, f"/{r}/{args.arm}/joint_increments", DEFAULT)
+    if not peer.spin_until(lambda: js_topic in peer.latest and inc.get_subscription_count() > 0, args.timeout):
+        return {"error": "bridge not found"}
+    trajectory, last_stamp = [], None
+    t0 = None
+    deadline = time.monotonic() + args.timeout
+    while len(trajectory) < args.steps and time.monotonic() < deadline:
+        js = peer.latest[js_topic]
+        s = stamp(js)
+        if s != last_stamp:
+            last_stamp = s
+            trajectory.append({"t": s, "q": list(js.position)})
+            if t0 is None:
+                t0 = time.monotonic()
+            k = len(trajectory)
+            msg = Float64MultiArray()
+            msg.data = [controller_increment(k, j, args.seed) for j in range(len(js.position))]
+            inc.publish(msg)
+        rclpy.spin_once(peer, timeout_sec=0.05)
+    wall = time.monotonic() - (t0 or time.monotonic())
+    return {"trajectory": trajectory, "steps_per_s": (len(trajectory) - 1) / wall if wall > 0 else 0.0}
+
+
+def cmd_badinput(args, peer):
+    r = args.robot
+    js_topic = f"/{r}/{args.arm}/joint_states"
+    peer.listen(JointState, js_topic)
+    peer.listen(DiagnosticArray, "/diagnostics")
+    peer.listen(Odometry, f"/{r}/odom")
+    inc = peer.create_publisher(Float64MultiArray, f"/{r}/{args.arm}/joint_increments", DEFAULT)
+    jset = peer.create_publisher(JointState, f"/{r}/{args.arm}/joint_set", DEFAULT)
+    wheel = peer.create_publisher(Float64, f"/{r}/{args.wheel}/wheel_velocity", DEFAULT) if args.wheel else None
+    if not peer.spin_until(lambda: js_topic in peer.latest and inc.get_subscription_count() > 0 and jset.get_subscription_count() > 0, args.timeout):
+        return {"error": "bridge not found"}
+    peer.spin_until(lambda: False, 0.5)
+    home = list(peer.latest[js_topic].position)
+    out = {"home": home, "alive_after": {}}
+
+    def alive(label):
+        js = peer.wait_for_new(js_topic, 3.0)
+        out["alive_after"][label] = None if js is None else list(js.position)
+
+    kind = args.kind
+    if kind == "nan":
+        m = Float64MultiArray(); m.data = [float("nan")] + [0.0] * 6; inc.publish(m)
+        m = Float64MultiArray(); m.data = [float("inf")] * 7; inc.publish(m)
+        if wheel:
+            wheel.publish(Float64(data=float("nan")))
+        peer.spin_until(lambda: False, 0.5); alive("nan")
+    elif kind == "wrong_length":
+        m = Float64MultiArray(); m.data = [0.3] * 6; inc.publish(m)
+        m = Float64MultiArray(); m.data = [0.3] * 9; inc.publish(m)
+        j = JointState(); j.name = ["joint1", "joint2"]; j.position = [0.3]; jset.publish(j)
+        peer.spin_until(lambda: False, 0.5); alive("wrong_length")
+    elif kind == "unknown_joint":
+        j = JointState(); j.name = ["joint1", "elbow_of_doom"]; j.position = [0.3, 0.3]; jset.publish(j)
+        peer.spin_until(lambda: False, 0.5); alive("unknown_joint")
+    elif kind == "beyond_limits":
+        j = JointState(); j.name = ["joint1"]; j.position = [10.0]; jset.publish(j)
+        # Keep it commanded while it travels (2.8 rad at 1.5 rad/s).
+        for _ in range(25):
+            jset.publish(j); peer.spin_until(lambda: False, 0.1)
+        alive("beyond_limits")
+    elif kind == "stale":
+        x0 = peer.latest[f"/{r}/odom"].pose.pose.position
+        for _ in range(15):
+            wheel.publish(Float64(data=3.0)); peer.spin_until(lambda: False, 0.1)
+        moving = peer.latest[f"/{r}/odom"].twist.twist.linear
+        out["speed_while_commanded"] = math.hypot(moving.x, moving.y)
+        # Stop sending: after 0.5 s the wheels brake.
+        peer.spin_until(lambda: False, 2.0)
+        still = peer.latest[f"/{r}/odom"].twist.twist.linear
+        out["speed_after_silence"] = math.hypot(still.x, still.y)
+        x1 = peer.latest[f"/{r}/odom"].pose.pose.position
+        out["moved_m"] = math.dist([x0.x, x0.y], [x1.x, x1.y])
+        alive("stale")
+    out["diagnostics"] = diag_values(peer)
+    return out
+
+
+def cmd_latency(args, peer):
+    """Median and p99 time from publishing increments to the first joint state that moves."""
+    r = args.robot
+    js_topic = f"/{r}/{args.arm}/joint_states"
+    peer.listen(JointState, js_topic)
+    inc = peer.create_publisher(Float64MultiArray, f"/{r}/{args.arm}/joint_increments", DEFAULT)
+    if not peer.spin_until(lambda: js_topic in peer.latest and inc.get_subscription_count() > 0, args.timeout):
+        return {"error": "bridge not found"}
+    samples = []
+    for i in range(args.samples):
+        sign = 1.0 if i % 2 == 0 else -1.0
+        peer.spin_until(lambda: False, 0.3)
+        m = Float64MultiArray(); m.data = [sign * 0.05] + [0.0] * 6
+        t = time.monotonic(); inc.publish(m)
+        js = peer.wait_for_new(js_topic, 2.0, lambda js: sign * js.velocity[0] > 0.05)
+        if js is not None:
+            samples.append(time.monotonic() - t)
+    samples.sort()
+    pick = lambda q: samples[min(len(samples) - 1, int(q * len(samples)))] if samples else None
+    return {"samples": len(samples), "median_ms": pick(0.5) * 1e3 if samples else None, "p99_ms": pick(0.99) * 1e3 if samples else None}
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("command")
+    p.add_argument("--robot", default="")
+    p.add_argument("--arms", default="")
+    p.add_argument("--wheels", default="")
+    p.add_argument("--arm", default="")
+    p.add_argument("--wheel", default="")
+    p.add_argument("--joint", type=int, default=0)
+    p.add_argument("--increment", type=float, default=0.2)
+    p.add_argument("--wheel-velocity", type=float, default=2.0)
+    p.add_argument("--drive-seconds", type=float, default=3.0)
+    p.add_argument("--samples", default="")
+    p.add_argument("--steps", type=int, default=60)
+    p.add_argument("--seed", type=float, default=0.0)
+    p.add_argument("--kind", default="")
+    p.add_argument("--timeout", type=float, default=15.0)
+    p.add_argument("--linger", type=float, default=2.0)
+    args = p.parse_args()
+    if args.command == "latency":
+        args.samples = int(args.samples or 50)
+    rclpy.init()
+    peer = Peer()
+    try:
+        out = {
+            "observe": cmd_observe, "drive": cmd_drive, "late": cmd_late, "roundtrip": cmd_roundtrip,
+            "lockstep": cmd_lockstep, "badinput": cmd_badinput, "latency": cmd_latency,
+        }[args.command](args, peer)
+    finally:
+        peer.destroy_node()
+        rclpy.try_shutdown()
+    print(json.dumps(out))
+    sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()
