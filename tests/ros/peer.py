@@ -59,13 +59,15 @@ TYPES = {
 
 
 def to_dict(msg):
-    """A message as plain JSON-able values, field by field."""
+    """A message as plain JSON-able values, field by field (`byte` fields as integers)."""
     if hasattr(msg, "get_fields_and_field_types"):
-        return {f: to_dict(getattr(msg, f)) for f in msg.get_fields_and_field_types()}
-    if isinstance(msg, (list, tuple)) or type(msg).__name__ == "ndarray" or type(msg).__name__ == "array":
+        out = {}
+        for f, ftype in msg.get_fields_and_field_types().items():
+            v = getattr(msg, f)
+            out[f] = v[0] if ftype == "octet" and isinstance(v, bytes) else to_dict(v)
+        return out
+    if isinstance(msg, (list, tuple)) or type(msg).__name__ in ("ndarray", "array"):
         return [to_dict(x) for x in msg]
-    if isinstance(msg, bytes):
-        return list(msg)
     return msg
 
 
@@ -83,8 +85,8 @@ def from_dict(cls, values):
             inner = ftype[len("sequence<"):-1]
             pkg, name = inner.split("/")
             setattr(msg, field, [from_dict(TYPES[f"{pkg}/{name}"], x) for x in v])
-        elif ftype == "octet" or ftype == "uint8" and isinstance(v, int):
-            setattr(msg, field, v)
+        elif ftype == "octet":
+            setattr(msg, field, bytes([v]))
         else:
             setattr(msg, field, v)
     return msg
@@ -128,7 +130,8 @@ def diag_values(peer, timeout=4.0):
     msg = peer.wait_for_new("/diagnostics", timeout)
     if msg is None:
         return None
-    return {kv.key: kv.value for kv in msg.status[0].values} | {"_level": int.from_bytes(msg.status[0].level, "little") if isinstance(msg.status[0].level, bytes) else int(msg.status[0].level), "_message": msg.status[0].message}
+    status = to_dict(msg.status[0])
+    return {kv["key"]: kv["value"] for kv in status["values"]} | {"_level": status["level"], "_message": status["message"]}
 
 
 def cmd_observe(args, peer):
