@@ -245,13 +245,22 @@ def controller_increment(k, j, seed):
     return 0.02 * math.sin(0.1 * k * (j + 1) + seed)
 
 
-def cmd_lockstep(args, peer):
-    r = args.robot
-    js_topic = f"/{r}/{args.arm}/joint_states"
+def arm_io(args, peer):
+    """Listens to an arm's joint states and publishes its increments; waits for the bridge.
+    Returns (joint-state topic, increments publisher), or None if no bridge answered."""
+    js_topic = f"/{args.robot}/{args.arm}/joint_states"
     peer.listen(JointState, js_topic)
-    inc = peer.create_publisher(Float64MultiArray, f"/{r}/{args.arm}/joint_increments", DEFAULT)
+    inc = peer.create_publisher(Float64MultiArray, f"/{args.robot}/{args.arm}/joint_increments", DEFAULT)
     if not peer.spin_until(lambda: js_topic in peer.latest and inc.get_subscription_count() > 0, args.timeout):
+        return None
+    return js_topic, inc
+
+
+def cmd_lockstep(args, peer):
+    io = arm_io(args, peer)
+    if io is None:
         return {"error": "bridge not found"}
+    js_topic, inc = io
     trajectory, last_stamp = [], None
     t0 = None
     deadline = time.monotonic() + args.timeout
@@ -331,12 +340,10 @@ def cmd_badinput(args, peer):
 
 def cmd_latency(args, peer):
     """Median and p99 time from publishing increments to the first joint state that moves."""
-    r = args.robot
-    js_topic = f"/{r}/{args.arm}/joint_states"
-    peer.listen(JointState, js_topic)
-    inc = peer.create_publisher(Float64MultiArray, f"/{r}/{args.arm}/joint_increments", DEFAULT)
-    if not peer.spin_until(lambda: js_topic in peer.latest and inc.get_subscription_count() > 0, args.timeout):
+    io = arm_io(args, peer)
+    if io is None:
         return {"error": "bridge not found"}
+    js_topic, inc = io
     samples = []
     for i in range(args.samples):
         sign = 1.0 if i % 2 == 0 else -1.0

@@ -38,6 +38,16 @@ pub enum RosError {
     },
 }
 
+/// Maps a ros2-client creation error to [`RosError::Create`].
+fn create_error<E: std::fmt::Debug>(what: &'static str, name: &str) -> impl FnOnce(E) -> RosError {
+    let name = name.to_string();
+    move |e| RosError::Create {
+        what,
+        name,
+        reason: format!("{e:?}"),
+    }
+}
+
 /// The domain id from `ROS_DOMAIN_ID` (0 when unset), as ROS 2 tools read it.
 pub fn domain_id_from_env() -> Result<u16, RosError> {
     match std::env::var("ROS_DOMAIN_ID") {
@@ -68,11 +78,7 @@ impl RosNode {
         })?;
         let node = context
             .new_node(node_name, NodeOptions::new().enable_rosout(false))
-            .map_err(|e| RosError::Create {
-                what: "node",
-                name: name.to_string(),
-                reason: format!("{e:?}"),
-            })?;
+            .map_err(create_error("node", name))?;
         Ok(Self { node, context })
     }
 
@@ -104,11 +110,7 @@ impl RosNode {
         })?;
         self.node
             .create_topic(&name, MessageTypeName::new(M::PACKAGE, M::NAME), qos)
-            .map_err(|e| RosError::Create {
-                what: "topic",
-                name: full_name.to_string(),
-                reason: format!("{e:?}"),
-            })
+            .map_err(create_error("topic", full_name))
     }
 
     /// A publisher of `M` on the absolute topic `full_name`.
@@ -120,11 +122,7 @@ impl RosNode {
         let topic = self.topic::<M>(full_name, &qos)?;
         self.node
             .create_publisher(&topic, Some(qos))
-            .map_err(|e| RosError::Create {
-                what: "publisher",
-                name: full_name.to_string(),
-                reason: format!("{e:?}"),
-            })
+            .map_err(create_error("publisher", full_name))
     }
 
     /// A subscription to `M` on the absolute topic `full_name`.
@@ -136,10 +134,6 @@ impl RosNode {
         let topic = self.topic::<M>(full_name, &qos)?;
         self.node
             .create_subscription(&topic, Some(qos))
-            .map_err(|e| RosError::Create {
-                what: "subscription",
-                name: full_name.to_string(),
-                reason: format!("{e:?}"),
-            })
+            .map_err(create_error("subscription", full_name))
     }
 }

@@ -84,6 +84,21 @@ struct ModuleState {
     holding: bool,
 }
 
+impl ModuleState {
+    /// Records an accepted command at `now_s`: the module stops holding.
+    fn accept(&mut self, now_s: f64) {
+        self.last_command_s = Some(now_s);
+        self.holding = false;
+    }
+
+    fn targets_update(&self, module: &str) -> Update {
+        Update::PositionTargets {
+            module: module.to_string(),
+            targets: self.targets.clone(),
+        }
+    }
+}
+
 /// What each module is commanded to do, and the rules for changing it.
 #[derive(Debug, Clone)]
 pub struct Commands {
@@ -173,12 +188,8 @@ impl Commands {
         for (t, d) in state.targets.iter_mut().zip(increments) {
             *t += d;
         }
-        state.last_command_s = Some(now_s);
-        state.holding = false;
-        Ok(Update::PositionTargets {
-            module: module.to_string(),
-            targets: state.targets.clone(),
-        })
+        state.accept(now_s);
+        Ok(state.targets_update(module))
     }
 
     /// Absolute targets [rad] by joint name (`joint3` or `arm0/joint3`); joints not named keep
@@ -230,12 +241,8 @@ impl Commands {
         for (i, q) in indices.into_iter().zip(positions) {
             state.targets[i] = *q;
         }
-        state.last_command_s = Some(now_s);
-        state.holding = false;
-        Ok(Update::PositionTargets {
-            module: module.to_string(),
-            targets: state.targets.clone(),
-        })
+        state.accept(now_s);
+        Ok(state.targets_update(module))
     }
 
     /// A wheel velocity [rad/s] for both wheels of a wheel module.
@@ -258,8 +265,7 @@ impl Commands {
             });
         }
         state.wheel_velocity = velocity;
-        state.last_command_s = Some(now_s);
-        state.holding = false;
+        state.accept(now_s);
         Ok(Update::WheelVelocity {
             module: module.to_string(),
             velocity,
@@ -290,10 +296,7 @@ impl Commands {
                 if let Some(q) = positions.get(name) {
                     state.targets = q.clone();
                 }
-                updates.push(Update::PositionTargets {
-                    module: name.clone(),
-                    targets: state.targets.clone(),
-                });
+                updates.push(state.targets_update(name));
             }
             if state.has_wheels {
                 state.wheel_velocity = 0.0;
