@@ -3,7 +3,8 @@
 
 use std::collections::BTreeMap;
 
-use kumi_model::{ActuatorMode, RobotModel};
+use kumi_model::{Actuator, ActuatorMode, RobotModel};
+use kumi_sim::apply_increments;
 
 /// Why a command was refused. Each kind is counted in `/diagnostics`.
 #[derive(Debug, Clone, PartialEq)]
@@ -73,6 +74,8 @@ impl std::fmt::Display for Rejection {
 struct ModuleState {
     /// Position joints' names (prefixed, `arm0/joint1`), in order.
     position_joints: Vec<String>,
+    /// Their actuators (for ranges), in the same order.
+    position_actuators: Vec<Actuator>,
     has_wheels: bool,
     /// Position targets [rad] the module is following.
     targets: Vec<f64>,
@@ -135,6 +138,7 @@ impl Commands {
                     m.name.clone(),
                     ModuleState {
                         has_wheels: m.actuators.iter().any(|a| a.mode == ActuatorMode::Velocity),
+                        position_actuators: m.position_joints().cloned().collect(),
                         position_joints,
                         targets,
                         wheel_velocity: 0.0,
@@ -185,9 +189,9 @@ impl Commands {
                 module: module.to_string(),
             });
         }
-        for (t, d) in state.targets.iter_mut().zip(increments) {
-            *t += d;
-        }
+        let actuators: Vec<&Actuator> = state.position_actuators.iter().collect();
+        state.targets = apply_increments(&state.targets, increments, &actuators)
+            .expect("lengths and values were checked above");
         state.accept(now_s);
         Ok(state.targets_update(module))
     }

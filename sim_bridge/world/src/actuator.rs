@@ -38,6 +38,30 @@ pub fn clamp_command(actuator: &Actuator, command: f64) -> Option<f64> {
     })
 }
 
+/// The meaning of joint increments, everywhere (training, the bridge, the arm node): each
+/// target moves by its increment [rad] and is clamped to its joint's range. `None` if any
+/// increment is non-finite or the lengths differ.
+pub fn apply_increments(
+    targets: &[f64],
+    increments: &[f64],
+    actuators: &[&Actuator],
+) -> Option<Vec<f64>> {
+    if targets.len() != increments.len()
+        || targets.len() != actuators.len()
+        || increments.iter().any(|d| !d.is_finite())
+    {
+        return None;
+    }
+    Some(
+        targets
+            .iter()
+            .zip(increments)
+            .zip(actuators)
+            .map(|((t, d), a)| a.clamp_position(t + d))
+            .collect(),
+    )
+}
+
 /// Moves a position set-point toward the command by at most `velocity_limit * dt` [rad].
 pub fn slew(setpoint: f64, command: f64, velocity_limit: f64, dt: f64) -> f64 {
     let max_step = velocity_limit * dt;
@@ -95,6 +119,21 @@ mod tests {
             sp = integrate_velocity_setpoint(sp, 5.0, 0.0, 0.45, 0.01);
         }
         assert_eq!(sp, 0.45);
+    }
+
+    #[test]
+    fn increments_move_targets_and_clamp_to_the_range() {
+        let a = arm_joint(); // range [-2, 2]
+        let joints = [&a, &a, &a];
+        assert_eq!(
+            apply_increments(&[0.0, 1.9, -1.0], &[0.1, 0.3, -0.5], &joints),
+            Some(vec![0.1, 2.0, -1.5])
+        );
+        assert_eq!(
+            apply_increments(&[0.0; 3], &[0.1, f64::NAN, 0.0], &joints),
+            None
+        );
+        assert_eq!(apply_increments(&[0.0; 3], &[0.1; 2], &joints), None);
     }
 
     #[test]

@@ -11,7 +11,9 @@ mod error;
 mod spawn;
 mod world;
 
-pub use actuator::{clamp_command, integrate_velocity_setpoint, slew, ServoState};
+pub use actuator::{
+    apply_increments, clamp_command, integrate_velocity_setpoint, slew, ServoState,
+};
 pub use config::SimConfig;
 pub use error::SimError;
 pub use kumi_model::Layout;

@@ -1,0 +1,13 @@
+//! The low-level reaching skill's interface, defined once and used by the training environment
+//! and the arm-module node alike, so that what a policy saw in training is exactly what it is fed
+//! in deployment (SPEC section 4, the paper's Table I).
+//!
+//! - [`observation`]: the 21-value observation and its builder.
+//! - [`action`]: from the policy's 7 outputs to joint increments [rad].
+//! - [`goal`]: goal sampling in the arm base frame, and per-step goal noise.
+//! - [`rotation`]: the orientation error (the quaternion log map).
+
+pub mod action;
+pub mod goal;
+pub mod observation;
+pub mod rotation;

@@ -1,0 +1,76 @@
+//! The low-level policy's observation (Table I): joint angles, joint velocities, goal position
+//! and goal orientation, the goal in the arm's base frame.
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::rotation::canonical;
+
+/// Joints of an arm module.
+pub const JOINTS: usize = 7;
+/// Length of the observation.
+pub const OBSERVATION_DIM: usize = 21;
+
+/// Name of each observation entry, in order (written into the exported policy's metadata).
+pub const OBSERVATION_NAMES: [&str; OBSERVATION_DIM] = [
+    "q1", "q2", "q3", "q4", "q5", "q6", "q7", // joint angles [rad]
+    "qd1", "qd2", "qd3", "qd4", "qd5", "qd6", "qd7", // joint velocities [rad/s]
+    "goal_x", "goal_y", "goal_z", // goal position in the arm base frame [m]
+    "goal_qw", "goal_qx", "goal_qy",
+    "goal_qz", // goal orientation in the arm base frame, w >= 0
+];
+
+/// A reaching goal for the tool frame, in the arm base frame (`_b`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Goal {
+    /// Tool position [m].
+    pub position_b: Vector3<f64>,
+    /// Tool orientation.
+    pub orientation_b: UnitQuaternion<f64>,
+}
+
+/// Builds the observation: `q` [rad] and `qd` [rad/s] in the module's joint order, and the goal
+/// in the arm base frame. The goal quaternion is written with a non-negative scalar part.
+/// Values are rounded to f32 here, once, for both training and deployment.
+pub fn build(q: &[f64; JOINTS], qd: &[f64; JOINTS], goal: &Goal) -> [f32; OBSERVATION_DIM] {
+    let mut obs = [0.0_f32; OBSERVATION_DIM];
+    for i in 0..JOINTS {
+        obs[i] = q[i] as f32;
+        obs[JOINTS + i] = qd[i] as f32;
+    }
+    let p = goal.position_b;
+    obs[14] = p.x as f32;
+    obs[15] = p.y as f32;
+    obs[16] = p.z as f32;
+    let o = canonical(&goal.orientation_b);
+    obs[17] = o.w as f32;
+    obs[18] = o.i as f32;
+    obs[19] = o.j as f32;
+    obs[20] = o.k as f32;
+    obs
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_is_joints_velocities_position_quaternion() {
+        let q = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7];
+        let qd = [-1.0, -2.0, -3.0, -4.0, -5.0, -6.0, -7.0];
+        // A goal whose quaternion comes in with w < 0: the observation flips it.
+        let r = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.5);
+        let goal = Goal {
+            position_b: Vector3::new(0.25, -0.125, 1.0),
+            orientation_b: UnitQuaternion::new_unchecked(-r.into_inner()),
+        };
+        let obs = build(&q, &qd, &goal);
+        assert_eq!(&obs[..7], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7]);
+        assert_eq!(&obs[7..14], &[-1.0, -2.0, -3.0, -4.0, -5.0, -6.0, -7.0]);
+        assert_eq!(&obs[14..17], &[0.25, -0.125, 1.0]);
+        // cos(0.25), 0, 0, sin(0.25)
+        assert_eq!(obs[17], 0.25_f64.cos() as f32);
+        assert_eq!(&obs[18..20], &[0.0, 0.0]);
+        assert_eq!(obs[20], 0.25_f64.sin() as f32);
+        assert_eq!(OBSERVATION_NAMES[14], "goal_x");
+    }
+}

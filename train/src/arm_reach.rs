@@ -1,0 +1,240 @@
+//! The low-level environment (SPEC section 4): one arm module with its base fixed, reaching
+//! goals in its base frame. A thin shell: observation, action and reward are the shared pure
+//! functions of `kumi-policies` and [`crate::reward`]; physics is `kumi-sim`.
+
+use std::sync::Arc;
+
+use kumi_model::{Actuator, ActuatorMode, RobotModel};
+use kumi_policies::action;
+use kumi_policies::goal::{GoalNoise, GoalRange};
+use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
+use kumi_policies::rotation::orientation_error;
+use kumi_sim::{apply_increments, RobotState, SimConfig, SimError, World};
+use nalgebra::Isometry3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::reward::{reach_terms, ReachTerms, ReachWeights};
+
+/// Episode and task settings. Defaults are the paper's (section IV-A) and kumi's reward weights.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArmReachConfig {
+    /// Control steps per episode (360 at 30 Hz: 12 s).
+    pub episode_steps: usize,
+    /// Control steps between goal resamples (120 at 30 Hz: 4 s).
+    pub goal_period_steps: usize,
+    /// Initial joint angles are uniform in [-r, r] [rad].
+    pub initial_joint_range: f64,
+    pub goals: GoalRange,
+    pub goal_noise: GoalNoise,
+    pub weights: ReachWeights,
+}
+
+impl Default for ArmReachConfig {
+    fn default() -> Self {
+        Self {
+            episode_steps: 360,
+            goal_period_steps: 120,
+            initial_joint_range: 0.5,
+            goals: GoalRange::default(),
+            goal_noise: GoalNoise {
+                position_std: 0.005,
+                orientation_std: 0.01,
+            },
+            weights: ReachWeights::default(),
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum EnvError {
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    #[error("the arm-reach environment needs a fixed-base robot with one 7-joint arm module and a tool frame; `{0}` is not one")]
+    NotASingleArm(String),
+}
+
+/// What one step produced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepOutcome {
+    pub observation: [f32; OBSERVATION_DIM],
+    pub reward: f64,
+    pub terms: ReachTerms,
+    /// The episode reached its step limit (a time-out: bootstrap the value).
+    pub truncated: bool,
+    /// A goal period ended at this step: the errors below are the paper's final errors.
+    pub goal_ended: bool,
+    /// Tool position error [m] to the (noise-free) goal after this step.
+    pub position_error: f64,
+    /// Tool orientation error [rad] to the goal after this step.
+    pub orientation_error: f64,
+}
+
+/// One fixed-base arm reaching goals.
+pub struct ArmReach {
+    world: World,
+    module: String,
+    ee_link: String,
+    base_link: String,
+    actuators: Vec<Actuator>,
+    config: ArmReachConfig,
+    rng: ChaCha8Rng,
+    goal: Goal,
+    observed_goal: Goal,
+    targets: Vec<f64>,
+    previous_action: [f32; JOINTS],
+    step: usize,
+}
+
+impl ArmReach {
+    /// An environment on `model` (a fixed-base single arm, such as the shipped `arm`), seeded.
+    pub fn new(
+        model: Arc<RobotModel>,
+        config: ArmReachConfig,
+        seed: u64,
+    ) -> Result<Self, EnvError> {
+        let not_arm = || EnvError::NotASingleArm(model.name.clone());
+        if !model.fixed_base || model.modules.len() != 1 {
+            return Err(not_arm());
+        }
+        let arm = &model.modules[0];
+        let actuators: Vec<Actuator> = arm.position_joints().cloned().collect();
+        if actuators.len() != JOINTS
+            || arm
+                .actuators
+                .iter()
+                .any(|a| a.mode != ActuatorMode::Position)
+        {
+            return Err(not_arm());
+        }
+        let ee_link = arm.ee_link.clone().ok_or_else(not_arm)?;
+        let world = World::new(model.clone(), SimConfig::for_model(&model))?;
+        let goal = Goal {
+            position_b: Default::default(),
+            orientation_b: Default::default(),
+        };
+        let mut env = Self {
+            module: arm.name.clone(),
+            base_link: arm.root_link.clone(),
+            ee_link,
+            actuators,
+            world,
+            config,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            goal,
+            observed_goal: goal,
+            targets: vec![0.0; JOINTS],
+            previous_action: [0.0; JOINTS],
+            step: 0,
+        };
+        env.reset();
+        Ok(env)
+    }
+
+    /// Starts an episode: random initial joints, a fresh goal. Returns the first observation.
+    pub fn reset(&mut self) -> [f32; OBSERVATION_DIM] {
+        let r = self.config.initial_joint_range;
+        let q: Vec<f64> = self
+            .actuators
+            .iter()
+            .map(|a| {
+                a.clamp_position(if r > 0.0 {
+                    self.rng.random_range(-r..r)
+                } else {
+                    0.0
+                })
+            })
+            .collect();
+        self.world.reset(&RobotState {
+            base_pose_w: Isometry3::identity(),
+            joint_positions: q.clone(),
+        });
+        self.targets = q;
+        self.previous_action = [0.0; JOINTS];
+        self.step = 0;
+        self.goal = self.config.goals.sample(&mut self.rng);
+        self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
+        self.observation()
+    }
+
+    /// The tool pose in the arm base frame.
+    pub fn tool_pose_b(&self) -> Isometry3<f64> {
+        let base = self
+            .world
+            .link_pose(&self.base_link)
+            .expect("the base link exists");
+        let tool = self
+            .world
+            .link_pose(&self.ee_link)
+            .expect("the tool link exists");
+        base.inverse() * tool
+    }
+
+    /// Position [m] and orientation [rad] errors of the tool to the current goal.
+    pub fn errors(&self) -> (f64, f64) {
+        let tool = self.tool_pose_b();
+        (
+            (tool.translation.vector - self.goal.position_b).norm(),
+            orientation_error(&self.goal.orientation_b, &tool.rotation),
+        )
+    }
+
+    fn joints(&self) -> ([f64; JOINTS], [f64; JOINTS]) {
+        let mut q = [0.0; JOINTS];
+        let mut qd = [0.0; JOINTS];
+        q.copy_from_slice(&self.world.joint_positions());
+        qd.copy_from_slice(&self.world.joint_velocities());
+        (q, qd)
+    }
+
+    /// The observation the policy sees now (with the noisy goal).
+    pub fn observation(&self) -> [f32; OBSERVATION_DIM] {
+        let (q, qd) = self.joints();
+        observation::build(&q, &qd, &self.observed_goal)
+    }
+
+    /// The goal the policy is reaching for (noise-free).
+    pub fn goal(&self) -> Goal {
+        self.goal
+    }
+
+    /// Applies one action (7 values in [-1, 1], clipped), steps the physics one control step.
+    pub fn step(&mut self, act: &[f32; JOINTS]) -> StepOutcome {
+        let increments = action::increments(act);
+        let actuators: Vec<&Actuator> = self.actuators.iter().collect();
+        self.targets = apply_increments(&self.targets, &increments, &actuators)
+            .expect("increments are finite, lengths match");
+        self.world
+            .set_position_targets(&self.module, &self.targets)
+            .expect("targets are finite and the module is an arm");
+        self.world.step();
+        self.step += 1;
+
+        let (position_error, orientation_error) = self.errors();
+        let (_, qd) = self.joints();
+        let terms = reach_terms(
+            position_error,
+            orientation_error,
+            act,
+            &self.previous_action,
+            &qd,
+            &self.config.weights,
+        );
+        self.previous_action = *act;
+
+        let goal_ended = self.step.is_multiple_of(self.config.goal_period_steps);
+        if goal_ended {
+            self.goal = self.config.goals.sample(&mut self.rng);
+        }
+        self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
+        StepOutcome {
+            observation: self.observation(),
+            reward: terms.total(),
+            terms,
+            truncated: self.step >= self.config.episode_steps,
+            goal_ended,
+            position_error,
+            orientation_error,
+        }
+    }
+}

@@ -1,0 +1,8 @@
+//! Training for kumi: environments on the same rapier world the sim bridge runs, and the pure
+//! reward terms they use.
+//!
+//! - [`reward`]: the low-level reaching reward (the paper's Eq. 4), term by term.
+//! - [`arm_reach`]: the low-level environment, one fixed-base arm module reaching goals.
+
+pub mod arm_reach;
+pub mod reward;

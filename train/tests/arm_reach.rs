@@ -1,0 +1,135 @@
+//! The arm-reach environment behaves as SPEC section 4 says.
+
+use std::sync::Arc;
+
+use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
+use kumi_policies::action::INCREMENT_SCALE;
+use kumi_train::arm_reach::{ArmReach, ArmReachConfig, EnvError};
+
+fn model(name: &str) -> Arc<RobotModel> {
+    let library = ModuleLibrary::shipped();
+    Arc::new(assemble(
+        &load_morphology(name, &library).unwrap(),
+        &library,
+    ))
+}
+
+fn env(seed: u64) -> ArmReach {
+    ArmReach::new(model("arm"), ArmReachConfig::default(), seed).unwrap()
+}
+
+#[test]
+fn only_a_fixed_single_arm_is_accepted() {
+    assert!(matches!(
+        ArmReach::new(model("dragon"), ArmReachConfig::default(), 0),
+        Err(EnvError::NotASingleArm(_))
+    ));
+}
+
+#[test]
+fn reset_draws_joints_and_goals_in_range() {
+    let mut e = env(1);
+    for _ in 0..20 {
+        let obs = e.reset();
+        assert!(
+            obs[..7].iter().all(|q| q.abs() <= 0.5 + 1e-3),
+            "initial joints {:?}",
+            &obs[..7]
+        );
+        let g = e.goal().position_b;
+        assert!(
+            (-0.1..=0.6).contains(&g.x)
+                && (-0.3..=0.3).contains(&g.y)
+                && (0.6..=1.3).contains(&g.z),
+            "{g}"
+        );
+        // The observed goal is the goal plus a little noise.
+        assert!((obs[14] as f64 - g.x).abs() < 0.05 && (obs[16] as f64 - g.z).abs() < 0.05);
+        assert!(obs[17] >= 0.0, "quaternion written with w >= 0");
+    }
+}
+
+#[test]
+fn zero_action_holds_and_a_saturated_action_moves_one_slew_per_step() {
+    let mut e = env(2);
+    let start = e.reset();
+    let mut out = None;
+    for _ in 0..30 {
+        out = Some(e.step(&[0.0; 7]));
+    }
+    let held = out.unwrap().observation;
+    for j in 0..7 {
+        assert!(
+            (held[j] - start[j]).abs() < 0.02,
+            "joint{} drifted from {} to {}",
+            j + 1,
+            start[j],
+            held[j]
+        );
+    }
+    // +1 on joint1 for 10 steps: 10 x 0.05 rad.
+    for _ in 0..10 {
+        out = Some(e.step(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]));
+    }
+    for _ in 0..30 {
+        out = Some(e.step(&[0.0; 7]));
+    }
+    let moved = f64::from(out.unwrap().observation[0] - held[0]);
+    assert!(
+        (moved - 10.0 * INCREMENT_SCALE).abs() < 0.02,
+        "joint1 moved {moved} rad"
+    );
+}
+
+#[test]
+fn goals_change_every_4_s_and_episodes_end_at_12_s() {
+    let mut e = env(3);
+    e.reset();
+    let mut goal_ends = Vec::new();
+    for k in 1..=360 {
+        let before = e.goal();
+        let o = e.step(&[0.0; 7]);
+        if o.goal_ended {
+            goal_ends.push(k);
+            assert_ne!(before, e.goal(), "a new goal after the period");
+        }
+        assert_eq!(o.truncated, k == 360);
+        assert!(o.reward.is_finite());
+        assert!(
+            o.position_error >= 0.0
+                && (0.0..=std::f64::consts::PI + 1e-9).contains(&o.orientation_error)
+        );
+    }
+    assert_eq!(goal_ends, vec![120, 240, 360]);
+}
+
+#[test]
+fn the_same_seed_gives_the_same_episode() {
+    let run = |seed| {
+        let mut e = env(seed);
+        let mut obs = vec![e.reset()];
+        for k in 0..60 {
+            let a = [((k % 7) as f32 - 3.0) / 3.0; 7];
+            obs.push(e.step(&a).observation);
+        }
+        obs
+    };
+    assert_eq!(run(5), run(5));
+    assert_ne!(run(5), run(6));
+}
+
+#[test]
+fn the_observation_is_the_world_state_and_the_noisy_goal() {
+    let mut e = env(4);
+    e.reset();
+    let o = e.step(&[0.3, -0.2, 0.1, 0.0, 0.5, -0.5, 1.0]);
+    assert_eq!(
+        o.observation,
+        e.observation(),
+        "the step returns what observation() builds"
+    );
+    let tool = e.tool_pose_b();
+    let (p, r) = e.errors();
+    assert!((p - (tool.translation.vector - e.goal().position_b).norm()).abs() < 1e-12);
+    assert!(r >= 0.0);
+}
