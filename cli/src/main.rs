@@ -3,6 +3,7 @@
 mod bench;
 mod bridge;
 mod sim;
+mod train;
 
 use std::process::ExitCode;
 
@@ -31,6 +32,11 @@ enum Command {
     Sim(sim::SimArgs),
     /// Run the sim bridge node: the simulated robot on ROS 2 (stop with Ctrl-C).
     SimBridge(bridge::BridgeArgs),
+    /// Train policies with PPO.
+    Train {
+        #[command(subcommand)]
+        what: train::TrainCommand,
+    },
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -71,6 +77,7 @@ fn run() -> Result<()> {
         }
         Command::Sim(args) => sim::run(args),
         Command::SimBridge(args) => bridge::run(args),
+        Command::Train { what } => train::run(what),
         Command::Bench { what } => bench::run(what),
     }
 }

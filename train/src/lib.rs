@@ -5,4 +5,6 @@
 //! - [`arm_reach`]: the low-level environment, one fixed-base arm module reaching goals.
 
 pub mod arm_reach;
+pub mod env;
+pub mod ppo;
 pub mod reward;

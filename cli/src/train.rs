@@ -1,0 +1,151 @@
+//! `kumi train arm`: trains the low-level reaching skill with PPO.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use kumi_train::arm_reach::{ArmReach, ArmReachConfig};
+use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
+
+use crate::sim::load_model;
+
+#[derive(Subcommand, Debug)]
+pub enum TrainCommand {
+    /// The low-level skill: one fixed-base arm reaching goals (SPEC section 4).
+    Arm(TrainArmArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct TrainArmArgs {
+    /// PPO hyperparameters (TOML; default: the shipped train/configs/arm_reach.toml).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Override the number of environment steps.
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Override the seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Where metrics go (metrics.csv).
+    #[arg(long, default_value = "runs/arm_reach")]
+    pub out: PathBuf,
+}
+
+const SHIPPED_CONFIG: &str = include_str!("../../train/configs/arm_reach.toml");
+
+const COLUMNS: [&str; 15] = [
+    "iteration",
+    "env_steps",
+    "collect_steps_per_s",
+    "update_samples_per_s",
+    "mean_step_reward",
+    "mean_episode_return",
+    "final_position_error",
+    "final_orientation_error",
+    "policy_loss",
+    "value_loss",
+    "entropy",
+    "approx_kl",
+    "clip_fraction",
+    "action_std",
+    "wall_s",
+];
+
+fn row(s: &IterationStats, wall_s: f64) -> String {
+    let v = [
+        s.iteration as f64,
+        s.env_steps as f64,
+        s.collect_steps_per_s,
+        s.update_samples_per_s,
+        s.mean_step_reward,
+        s.mean_episode_return,
+        s.final_position_error,
+        s.final_orientation_error,
+        s.policy_loss,
+        s.value_loss,
+        s.entropy,
+        s.approx_kl,
+        s.clip_fraction,
+        s.action_std,
+        wall_s,
+    ];
+    v.iter()
+        .map(|x| x.to_string())
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+pub fn run(what: TrainCommand) -> Result<()> {
+    let TrainCommand::Arm(args) = what;
+    let text = match &args.config {
+        Some(path) => {
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?
+        }
+        None => SHIPPED_CONFIG.to_string(),
+    };
+    let mut config: PpoConfig = toml::from_str(&text).with_context(|| {
+        format!(
+            "parsing {}",
+            args.config
+                .as_ref()
+                .map_or("the shipped config".into(), |p| p.display().to_string())
+        )
+    })?;
+    if let Some(s) = args.steps {
+        config.total_steps = s;
+    }
+    if let Some(s) = args.seed {
+        config.seed = s;
+    }
+    if config.num_envs == 0
+        || config.rollout_steps == 0
+        || config.minibatches == 0
+        || config.epochs == 0
+    {
+        bail!("num_envs, rollout_steps, epochs and minibatches must be positive");
+    }
+    let model = load_model("arm")?;
+    let envs = (0..config.num_envs)
+        .map(|i| {
+            ArmReach::new(
+                model.clone(),
+                ArmReachConfig::default(),
+                config.seed.wrapping_mul(1000).wrapping_add(i as u64),
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let csv_path = args.out.join("metrics.csv");
+    let mut csv = std::fs::File::create(&csv_path)
+        .with_context(|| format!("creating {}", csv_path.display()))?;
+    writeln!(csv, "{}", COLUMNS.join(","))?;
+
+    let total = config.total_steps;
+    let mut trainer = Trainer::new(config, envs)?;
+    let start = Instant::now();
+    eprintln!(
+        "training the arm-reaching skill for {total} steps; metrics in {}",
+        csv_path.display()
+    );
+    while trainer.env_steps < total {
+        let s = trainer.iterate()?;
+        let wall = start.elapsed().as_secs_f64();
+        writeln!(csv, "{}", row(&s, wall))?;
+        eprintln!(
+            "[{:>5.1}%] steps {:>7}/{total} | {:>5.0} steps/s collect, {:>6.0} samples/s update | reward/step {:>6.3} | final error {:.3} m, {:.3} rad | std {:.3} | {:.0} s",
+            100.0 * s.env_steps as f64 / total as f64,
+            s.env_steps,
+            s.collect_steps_per_s,
+            s.update_samples_per_s,
+            s.mean_step_reward,
+            s.final_position_error,
+            s.final_orientation_error,
+            s.action_std,
+            wall
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,96 @@
+//! PPO learns a tiny task in seconds: a point on a line must move to a target.
+
+use kumi_train::env::{Environment, Transition};
+use kumi_train::ppo::trainer::{PpoConfig, Trainer};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Observation (x, target); action moves x by 0.1 * clip(a, -1, 1); reward -|x - target|.
+struct PointReach {
+    x: f32,
+    target: f32,
+    t: usize,
+    rng: ChaCha8Rng,
+}
+
+impl Environment for PointReach {
+    fn observation_dim(&self) -> usize {
+        2
+    }
+
+    fn action_dim(&self) -> usize {
+        1
+    }
+
+    fn reset(&mut self) -> Vec<f32> {
+        self.x = self.rng.random_range(-1.0..1.0);
+        self.target = self.rng.random_range(-1.0..1.0);
+        self.t = 0;
+        vec![self.x, self.target]
+    }
+
+    fn step(&mut self, action: &[f32]) -> Transition {
+        self.x += 0.1 * action[0].clamp(-1.0, 1.0);
+        self.t += 1;
+        Transition {
+            observation: vec![self.x, self.target],
+            reward: -f64::from((self.x - self.target).abs()),
+            terminated: false,
+            truncated: self.t >= 20,
+            goal_errors: None,
+        }
+    }
+}
+
+fn trainer(seed: u64) -> Trainer<PointReach> {
+    let envs = (0..8)
+        .map(|i| PointReach {
+            x: 0.0,
+            target: 0.0,
+            t: 0,
+            rng: ChaCha8Rng::seed_from_u64(seed * 100 + i),
+        })
+        .collect();
+    let config = PpoConfig {
+        seed,
+        num_envs: 8,
+        rollout_steps: 64,
+        total_steps: 0,
+        hidden: vec![32, 32],
+        learning_rate: 3e-3,
+        epochs: 4,
+        minibatches: 4,
+        entropy_coef: 0.0,
+        ..PpoConfig::default()
+    };
+    Trainer::new(config, envs).unwrap()
+}
+
+#[test]
+fn reward_improves_on_a_tiny_task() {
+    let mut t = trainer(1);
+    let first = t.iterate().unwrap().mean_step_reward;
+    let mut last = first;
+    for _ in 0..24 {
+        last = t.iterate().unwrap().mean_step_reward;
+    }
+    // A policy that does nothing scores about -0.67 per step; one that walks straight to the
+    // target about -0.25. Training must close most of that gap.
+    assert!(first < -0.5, "the untrained policy should be poor: {first}");
+    assert!(
+        last > -0.35,
+        "PPO did not learn: mean step reward {first:.3} -> {last:.3}"
+    );
+}
+
+#[test]
+fn training_is_reproducible_for_a_seed() {
+    let run = |seed| {
+        let mut t = trainer(seed);
+        (0..3)
+            .map(|_| t.iterate().unwrap().mean_step_reward)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(run(7), run(7));
+    assert_ne!(run(7), run(8));
+}
