@@ -8,6 +8,15 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig};
 use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
+use kumi_train::reward::ReachWeights;
+
+/// The training config file: PPO hyperparameters and the reward's weights.
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TrainArmConfig {
+    ppo: PpoConfig,
+    reward: ReachWeights,
+}
 
 use crate::sim::load_model;
 
@@ -85,7 +94,7 @@ pub fn run(what: TrainCommand) -> Result<()> {
         }
         None => SHIPPED_CONFIG.to_string(),
     };
-    let mut config: PpoConfig = toml::from_str(&text).with_context(|| {
+    let file: TrainArmConfig = toml::from_str(&text).with_context(|| {
         format!(
             "parsing {}",
             args.config
@@ -93,6 +102,7 @@ pub fn run(what: TrainCommand) -> Result<()> {
                 .map_or("the shipped config".into(), |p| p.display().to_string())
         )
     })?;
+    let mut config = file.ppo;
     if let Some(s) = args.steps {
         config.total_steps = s;
     }
@@ -111,7 +121,10 @@ pub fn run(what: TrainCommand) -> Result<()> {
         .map(|i| {
             ArmReach::new(
                 model.clone(),
-                ArmReachConfig::default(),
+                ArmReachConfig {
+                    weights: file.reward,
+                    ..ArmReachConfig::default()
+                },
                 config.seed.wrapping_mul(1000).wrapping_add(i as u64),
             )
         })

@@ -103,3 +103,64 @@ fn bench_sim_json_has_the_documented_records() {
     }
     assert_eq!(records[1]["worlds"], 2);
 }
+
+#[test]
+fn train_arm_runs_the_shipped_config_and_writes_metrics() {
+    let out_dir = std::env::temp_dir().join(format!("kumi-train-{}", std::process::id()));
+    let out = kumi(&[
+        "train",
+        "arm",
+        "--steps",
+        "4096",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(out_dir.join("metrics.csv")).unwrap();
+    std::fs::remove_dir_all(&out_dir).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 2, "a header and one iteration: {csv}");
+    assert!(lines[0].starts_with(
+        "iteration,env_steps,collect_steps_per_s,update_samples_per_s,mean_step_reward"
+    ));
+    assert!(lines[1].starts_with("1,4096,"), "{}", lines[1]);
+    let progress = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        progress.contains("steps/s collect") && progress.contains("final error"),
+        "{progress}"
+    );
+}
+
+#[test]
+fn train_refuses_a_config_with_unknown_fields() {
+    let path = std::env::temp_dir().join(format!("kumi-bad-train-{}.toml", std::process::id()));
+    let shipped = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../train/configs/arm_reach.toml"
+    ))
+    .unwrap();
+    std::fs::write(
+        &path,
+        shipped.replace("clip = 0.2", "clip = 0.2\nclipp = 0.3"),
+    )
+    .unwrap();
+    let out = kumi(&[
+        "train",
+        "arm",
+        "--config",
+        path.to_str().unwrap(),
+        "--steps",
+        "1",
+    ]);
+    std::fs::remove_file(&path).unwrap();
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("unknown field `clipp`"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

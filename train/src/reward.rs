@@ -7,7 +7,8 @@
 //! alignment (+ w_o exp(-a_o theta)), the evident intent of a reaching task.
 
 /// Weights and scales of the reaching reward. Defaults are kumi's choice (the paper gives none).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
 pub struct ReachWeights {
     /// Position term weight.
     pub w_p: f64,
