@@ -37,10 +37,17 @@ pub struct TrainArmArgs {
     /// Override the seed.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Where metrics go (metrics.csv).
+    /// Where metrics (metrics.csv) and checkpoints (checkpoint/) go.
     #[arg(long, default_value = "runs/arm_reach")]
     pub out: PathBuf,
+    /// Continue from a checkpoint directory (parameters, observation statistics, step count;
+    /// Adam's moments restart).
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
 }
+
+/// Iterations between checkpoints.
+const CHECKPOINT_EVERY: usize = 10;
 
 const SHIPPED_CONFIG: &str = include_str!("../../train/configs/arm_reach.toml");
 
@@ -138,6 +145,15 @@ pub fn run(what: TrainCommand) -> Result<()> {
 
     let total = config.total_steps;
     let mut trainer = Trainer::new(config, envs)?;
+    if let Some(dir) = &args.resume {
+        trainer.load_checkpoint(dir)?;
+        eprintln!(
+            "resumed from {} at {} steps",
+            dir.display(),
+            trainer.env_steps
+        );
+    }
+    let checkpoint = args.out.join("checkpoint");
     let start = Instant::now();
     eprintln!(
         "training the arm-reaching skill for {total} steps; metrics in {}",
@@ -159,6 +175,11 @@ pub fn run(what: TrainCommand) -> Result<()> {
             s.action_std,
             wall
         );
+        if s.iteration.is_multiple_of(CHECKPOINT_EVERY) {
+            trainer.save_checkpoint(&checkpoint)?;
+        }
     }
+    trainer.save_checkpoint(&checkpoint)?;
+    eprintln!("checkpoint in {}", checkpoint.display());
     Ok(())
 }

@@ -121,6 +121,28 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
         String::from_utf8_lossy(&out.stderr)
     );
     let csv = std::fs::read_to_string(out_dir.join("metrics.csv")).unwrap();
+    assert!(out_dir.join("checkpoint/params.safetensors").exists());
+    // Resuming continues the step count.
+    let resumed = kumi(&[
+        "train",
+        "arm",
+        "--steps",
+        "8192",
+        "--resume",
+        out_dir.join("checkpoint").to_str().unwrap(),
+        "--out",
+        out_dir.join("more").to_str().unwrap(),
+    ]);
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    let more = std::fs::read_to_string(out_dir.join("more/metrics.csv")).unwrap();
+    assert!(
+        more.lines().nth(1).unwrap().starts_with("2,8192,"),
+        "{more}"
+    );
     std::fs::remove_dir_all(&out_dir).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), 2, "a header and one iteration: {csv}");

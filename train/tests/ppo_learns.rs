@@ -94,3 +94,43 @@ fn training_is_reproducible_for_a_seed() {
     assert_eq!(run(7), run(7));
     assert_ne!(run(7), run(8));
 }
+
+#[test]
+fn a_checkpoint_restores_the_policy_exactly() {
+    let dir = std::env::temp_dir().join(format!("kumi-ckpt-{}", std::process::id()));
+    let mut a = trainer(3);
+    for _ in 0..3 {
+        a.iterate().unwrap();
+    }
+    a.save_checkpoint(&dir).unwrap();
+    let mut b = trainer(4);
+    assert_ne!(a.act(&[0.3, -0.4]).unwrap(), b.act(&[0.3, -0.4]).unwrap());
+    b.load_checkpoint(&dir).unwrap();
+    assert_eq!(
+        a.act(&[0.3, -0.4]).unwrap(),
+        b.act(&[0.3, -0.4]).unwrap(),
+        "same deterministic action"
+    );
+    assert_eq!((b.iteration, b.env_steps), (3, 3 * 8 * 64));
+    assert_eq!(a.norm, b.norm);
+    // A checkpoint from another network shape is refused with a clear error.
+    let envs = (0..2)
+        .map(|i| PointReach {
+            x: 0.0,
+            target: 0.0,
+            t: 0,
+            rng: ChaCha8Rng::seed_from_u64(i),
+        })
+        .collect();
+    let mut other = Trainer::new(
+        PpoConfig {
+            hidden: vec![8],
+            ..PpoConfig::default()
+        },
+        envs,
+    )
+    .unwrap();
+    let err = other.load_checkpoint(&dir).unwrap_err().to_string();
+    assert!(err.contains("has shape"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -76,6 +76,20 @@ impl Mlp {
             .collect()
     }
 
+    /// The variables with stable names: `<prefix>.<layer>.weight` and `.bias`.
+    pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
+        self.layers
+            .iter()
+            .enumerate()
+            .flat_map(|(k, (w, b))| {
+                [
+                    (format!("{prefix}.{k}.weight"), w.clone()),
+                    (format!("{prefix}.{k}.bias"), b.clone()),
+                ]
+            })
+            .collect()
+    }
+
     /// The parameters as plain arrays, layer by layer (for export).
     pub fn parameters(&self) -> Result<Vec<DenseParameters>> {
         self.layers
@@ -118,6 +132,14 @@ impl ActorCritic {
                 &Tensor::full(initial_log_std, action_dim, device)?.to_dtype(DType::F32)?,
             )?,
         })
+    }
+
+    /// Every variable with its stable name (for checkpoints).
+    pub fn named_vars(&self) -> Vec<(String, Var)> {
+        let mut v = self.actor.named_vars("actor");
+        v.extend(self.critic.named_vars("critic"));
+        v.push(("log_std".to_string(), self.log_std.clone()));
+        v
     }
 
     pub fn vars(&self) -> Vec<Var> {

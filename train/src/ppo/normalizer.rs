@@ -2,7 +2,7 @@
 //! into the exported policy.
 
 /// Running mean and variance per observation entry (Chan et al.'s parallel update).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RunningNorm {
     pub mean: Vec<f64>,
     pub var: Vec<f64>,

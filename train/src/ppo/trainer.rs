@@ -93,6 +93,26 @@ pub struct IterationStats {
     pub action_std: f64,
 }
 
+/// Errors saving or loading a checkpoint.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("{path}: {message}")]
+    Format { path: String, message: String },
+}
+
+/// Training progress saved beside the parameters.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct Progress {
+    iteration: usize,
+    env_steps: u64,
+    normalizer: RunningNorm,
+}
+
 /// PPO over a set of environments.
 pub struct Trainer<E: Environment> {
     pub config: PpoConfig,
@@ -334,8 +354,93 @@ impl<E: Environment> Trainer<E> {
         Ok(self.net.actor.forward(&obs)?.to_vec2::<f32>()?.remove(0))
     }
 
-    /// All trainable variables (for checkpoints).
+    /// All trainable variables.
     pub fn vars(&self) -> Vec<Var> {
         self.net.vars()
+    }
+
+    /// Saves the parameters (`params.safetensors`), the observation statistics and the
+    /// counters (`progress.json`) into `dir`.
+    pub fn save_checkpoint(
+        &self,
+        dir: &std::path::Path,
+    ) -> std::result::Result<(), CheckpointError> {
+        let io = |path: &std::path::Path| {
+            let path = path.display().to_string();
+            move |source| CheckpointError::Io { path, source }
+        };
+        std::fs::create_dir_all(dir).map_err(io(dir))?;
+        let params = dir.join("params.safetensors");
+        let tensors: std::collections::HashMap<String, Tensor> = self
+            .net
+            .named_vars()
+            .into_iter()
+            .map(|(n, v)| (n, v.as_tensor().clone()))
+            .collect();
+        candle_core::safetensors::save(&tensors, &params).map_err(|e| CheckpointError::Format {
+            path: params.display().to_string(),
+            message: e.to_string(),
+        })?;
+        let progress = dir.join("progress.json");
+        let json = serde_json::to_string_pretty(&Progress {
+            iteration: self.iteration,
+            env_steps: self.env_steps,
+            normalizer: self.norm.clone(),
+        })
+        .map_err(|e| CheckpointError::Format {
+            path: progress.display().to_string(),
+            message: e.to_string(),
+        })?;
+        std::fs::write(&progress, json).map_err(io(&progress))
+    }
+
+    /// Restores what [`Self::save_checkpoint`] wrote. The networks must have the same shapes.
+    /// Adam's moment estimates are not saved (candle cannot serialise them): a resumed run
+    /// restarts them.
+    pub fn load_checkpoint(
+        &mut self,
+        dir: &std::path::Path,
+    ) -> std::result::Result<(), CheckpointError> {
+        let params = dir.join("params.safetensors");
+        let format = |path: &std::path::Path, message: String| CheckpointError::Format {
+            path: path.display().to_string(),
+            message,
+        };
+        let tensors = candle_core::safetensors::load(&params, &self.device)
+            .map_err(|e| format(&params, e.to_string()))?;
+        for (name, var) in self.net.named_vars() {
+            let t = tensors
+                .get(&name)
+                .ok_or_else(|| format(&params, format!("no tensor `{name}`")))?;
+            if t.dims() != var.as_tensor().dims() {
+                return Err(format(
+                    &params,
+                    format!(
+                        "`{name}` has shape {:?}, the network {:?}",
+                        t.dims(),
+                        var.as_tensor().dims()
+                    ),
+                ));
+            }
+            var.set(t).map_err(|e| format(&params, e.to_string()))?;
+        }
+        let progress_path = dir.join("progress.json");
+        let text =
+            std::fs::read_to_string(&progress_path).map_err(|source| CheckpointError::Io {
+                path: progress_path.display().to_string(),
+                source,
+            })?;
+        let progress: Progress =
+            serde_json::from_str(&text).map_err(|e| format(&progress_path, e.to_string()))?;
+        if progress.normalizer.mean.len() != self.norm.mean.len() {
+            return Err(format(
+                &progress_path,
+                "observation size differs from this environment's".into(),
+            ));
+        }
+        self.iteration = progress.iteration;
+        self.env_steps = progress.env_steps;
+        self.norm = progress.normalizer;
+        Ok(())
     }
 }
