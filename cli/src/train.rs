@@ -181,5 +181,25 @@ pub fn run(what: TrainCommand) -> Result<()> {
     }
     trainer.save_checkpoint(&checkpoint)?;
     eprintln!("checkpoint in {}", checkpoint.display());
+
+    // The deterministic actor, normalisation included, with the skill's metadata.
+    let arm = &model.modules[0];
+    let prefix = format!("{}/", arm.name);
+    let joints: Vec<&str> = arm
+        .position_joints()
+        .map(|a| a.joint.trim_start_matches(prefix.as_str()))
+        .collect();
+    let metadata = kumi_policies::metadata::arm_reach(
+        &joints,
+        kumi_sim::SimConfig::for_model(&model).control_hz,
+        &kumi_policies::metadata::fingerprint(&text),
+        trainer.env_steps,
+    );
+    let onnx =
+        kumi_train::export::actor_model(&trainer.norm, &trainer.net.actor.parameters()?, &metadata);
+    let onnx_path = args.out.join("arm_reach.onnx");
+    std::fs::write(&onnx_path, kumi_train::export::encode(&onnx))
+        .with_context(|| format!("writing {}", onnx_path.display()))?;
+    eprintln!("policy in {}", onnx_path.display());
     Ok(())
 }

@@ -122,6 +122,11 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
     );
     let csv = std::fs::read_to_string(out_dir.join("metrics.csv")).unwrap();
     assert!(out_dir.join("checkpoint/params.safetensors").exists());
+    let onnx = std::fs::read(out_dir.join("arm_reach.onnx")).unwrap();
+    assert!(
+        onnx.len() > 100_000,
+        "a 21-256-128-7 actor is about 160 kB of weights"
+    );
     // Resuming continues the step count.
     let resumed = kumi(&[
         "train",

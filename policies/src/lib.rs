@@ -9,5 +9,6 @@
 
 pub mod action;
 pub mod goal;
+pub mod metadata;
 pub mod observation;
 pub mod rotation;

@@ -6,5 +6,6 @@
 
 pub mod arm_reach;
 pub mod env;
+pub mod export;
 pub mod ppo;
 pub mod reward;

@@ -1,0 +1,102 @@
+//! The exported ONNX actor reproduces the training network's output.
+
+use candle_core::Device;
+use kumi_train::export::{actor_model, encode, INPUT, OPSET, OUTPUT};
+use kumi_train::ppo::network::ActorCritic;
+use kumi_train::ppo::normalizer::RunningNorm;
+use prost::Message;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use tract_onnx::prelude::*;
+
+const OBS: usize = 21;
+const ACT: usize = 7;
+
+fn random_rows(rng: &mut ChaCha8Rng, n: usize) -> Vec<Vec<f32>> {
+    (0..n)
+        .map(|_| (0..OBS).map(|_| rng.random_range(-3.0..3.0)).collect())
+        .collect()
+}
+
+#[test]
+fn onnx_actor_matches_the_training_network_to_1e_5() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let net = ActorCritic::new(OBS, ACT, &[256, 128], -0.5, &mut rng, &Device::Cpu).unwrap();
+    // Statistics that are far from identity, so the normalisation matters.
+    let mut norm = RunningNorm::new(OBS);
+    let seen: Vec<Vec<f32>> = (0..500)
+        .map(|_| {
+            (0..OBS)
+                .map(|j| rng.random_range(-1.0..1.0) * (j as f32 + 1.0) + j as f32)
+                .collect()
+        })
+        .collect();
+    norm.update(&seen.iter().map(|r| r.as_slice()).collect::<Vec<_>>());
+
+    let metadata = vec![
+        ("kumi.format".to_string(), "test".to_string()),
+        ("a.first".to_string(), "1".to_string()),
+    ];
+    let bytes = encode(&actor_model(
+        &norm,
+        &net.actor.parameters().unwrap(),
+        &metadata,
+    ));
+
+    // The model declares what the format promises, metadata sorted by key.
+    let decoded = tract_onnx::pb::ModelProto::decode(bytes.as_slice()).unwrap();
+    assert_eq!(decoded.opset_import[0].version, OPSET);
+    let keys: Vec<&str> = decoded
+        .metadata_props
+        .iter()
+        .map(|p| p.key.as_str())
+        .collect();
+    assert_eq!(keys, vec!["a.first", "kumi.format"]);
+    let graph = decoded.graph.unwrap();
+    assert_eq!(
+        (graph.input[0].name.as_str(), graph.output[0].name.as_str()),
+        (INPUT, OUTPUT)
+    );
+
+    // Run it in tract (pure Rust) on a batch and compare with the candle forward pass.
+    let batch = 32;
+    let model = tract_onnx::onnx()
+        .model_for_read(&mut bytes.as_slice())
+        .unwrap()
+        .with_input_fact(0, f32::fact([batch, OBS]).into())
+        .unwrap()
+        .into_optimized()
+        .unwrap()
+        .into_runnable()
+        .unwrap();
+    let rows = random_rows(&mut rng, batch);
+    let flat: Vec<f32> = rows.iter().flatten().copied().collect();
+    let input = tract_ndarray::Array2::from_shape_vec((batch, OBS), flat).unwrap();
+    let outputs = model.run(tvec!(Tensor::from(input).into())).unwrap();
+    let onnx: Vec<f32> = outputs[0]
+        .to_plain_array_view::<f32>()
+        .unwrap()
+        .iter()
+        .copied()
+        .collect();
+
+    let normalized: Vec<f32> = rows.iter().flat_map(|r| norm.apply(r)).collect();
+    let expected: Vec<f32> = net
+        .actor
+        .forward(&candle_core::Tensor::from_vec(normalized, (batch, OBS), &Device::Cpu).unwrap())
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    assert_eq!(onnx.len(), batch * ACT);
+    let worst = onnx
+        .iter()
+        .zip(&expected)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0_f32, f32::max);
+    assert!(
+        worst <= 1e-5,
+        "ONNX differs from the training network by {worst}"
+    );
+}
