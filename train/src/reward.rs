@@ -1,10 +1,14 @@
 //! The low-level reaching reward (the paper's Eq. 4), as pure functions.
 //!
-//! r = w_p exp(-a_p |p_ref - p_ee|) + w_o exp(-a_o theta) - w_a |a_t - a_{t-1}|^2 - w_v |qd|^2
+//! r = w_p exp(-a_p d) + w_pf exp(-a_pf d) + w_o exp(-a_o theta) - w_a |a_t - a_{t-1}|^2 - w_v |qd|^2
 //!
-//! where theta = 2 |log(q_ref^-1 q_ee)| is the orientation error [rad]. The paper prints the
-//! orientation term with a minus sign, which would penalise being *aligned*; kumi rewards
-//! alignment (+ w_o exp(-a_o theta)), the evident intent of a reaching task.
+//! where d = |p_ref - p_ee| [m] and theta = 2 |log(q_ref^-1 q_ee)| is the orientation error
+//! [rad]. Two deviations from the paper's Eq. 4, both deliberate:
+//! - the paper prints the orientation term with a minus sign, which would penalise being
+//!   *aligned*; kumi rewards alignment (+ w_o exp(-a_o theta)), the evident intent;
+//! - the position term has a coarse and a fine scale (like the upper level's two tanh terms,
+//!   Table IV): one exp cannot both pull from a metre away and sharpen the last centimetres.
+//!   Set `w_pf = 0` for the paper's single term.
 
 /// Weights and scales of the reaching reward. Defaults are kumi's choice (the paper gives none).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -14,6 +18,10 @@ pub struct ReachWeights {
     pub w_p: f64,
     /// Position scale [1/m]: the term halves at ln 2 / a_p metres.
     pub a_p: f64,
+    /// Fine position term weight.
+    pub w_pf: f64,
+    /// Fine position scale [1/m].
+    pub a_pf: f64,
     /// Orientation term weight.
     pub w_o: f64,
     /// Orientation scale [1/rad].
@@ -28,9 +36,11 @@ impl Default for ReachWeights {
     fn default() -> Self {
         Self {
             w_p: 1.0,
-            a_p: 5.0,
-            w_o: 0.5,
-            a_o: 2.0,
+            a_p: 2.0,
+            w_pf: 1.0,
+            a_pf: 20.0,
+            w_o: 1.0,
+            a_o: 0.5,
             w_a: 0.01,
             w_v: 0.001,
         }
@@ -69,7 +79,8 @@ pub fn reach_terms(
         .sum();
     let speed: f64 = qd.iter().map(|v| v * v).sum();
     ReachTerms {
-        position: w.w_p * (-w.a_p * position_error).exp(),
+        position: w.w_p * (-w.a_p * position_error).exp()
+            + w.w_pf * (-w.a_pf * position_error).exp(),
         orientation: w.w_o * (-w.a_o * orientation_error).exp(),
         action_rate: -w.w_a * action_rate,
         joint_velocity: -w.w_v * speed,
@@ -85,6 +96,8 @@ mod tests {
         let w = ReachWeights {
             w_p: 2.0,
             a_p: 10.0,
+            w_pf: 0.0,
+            a_pf: 0.0,
             w_o: 0.5,
             a_o: 1.0,
             w_a: 0.1,
@@ -96,6 +109,27 @@ mod tests {
         assert!((t.action_rate + 0.1).abs() < 1e-12); // -0.1 * (1^2 + 0^2)
         assert!((t.joint_velocity + 0.25).abs() < 1e-12); // -0.01 * (9 + 16)
         assert!((t.total() - (2.0 * (-1.0_f64).exp() + 0.5 - 0.1 - 0.25)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_fine_position_term_adds_a_sharp_peak() {
+        let w = ReachWeights {
+            w_p: 1.0,
+            a_p: 2.0,
+            w_pf: 1.0,
+            a_pf: 20.0,
+            w_o: 0.0,
+            a_o: 0.0,
+            w_a: 0.0,
+            w_v: 0.0,
+        };
+        // At 0.05 m: e^-0.1 + e^-1.
+        let t = reach_terms(0.05, 0.0, &[], &[], &[], &w);
+        assert!((t.position - ((-0.1_f64).exp() + (-1.0_f64).exp())).abs() < 1e-12);
+        // Going from 5 cm to 1 cm gains far more with the fine term than without.
+        let gain = reach_terms(0.01, 0.0, &[], &[], &[], &w).position - t.position;
+        let coarse_only = (-0.02_f64).exp() - (-0.1_f64).exp();
+        assert!(gain > 3.0 * coarse_only);
     }
 
     #[test]
