@@ -12,7 +12,7 @@ use kumi_sim::{SimConfig, World};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::sim::{load_model, tilt, PhysicsArgs};
+use crate::sim::{load_model, PhysicsArgs};
 
 #[derive(Subcommand, Debug)]
 pub enum BenchCommand {
@@ -111,7 +111,7 @@ fn stability(model: &Arc<RobotModel>, config: SimConfig) -> Result<Stability> {
     let (mut tilt_max, mut mount_max, mut lowest) = (0.0_f64, 0.0_f64, f64::INFINITY);
     for _ in 0..(60.0 * config.control_hz) as u64 {
         world.step();
-        tilt_max = tilt_max.max(tilt(&world));
+        tilt_max = tilt_max.max(world.base_tilt());
         lowest = lowest.min(world.lowest_collider_z());
         for (_, _, r) in world.mount_errors() {
             mount_max = mount_max.max(r);

@@ -124,12 +124,6 @@ pub fn wheel_directions(world: &World) -> Vec<(String, f64)> {
         .collect()
 }
 
-/// Tilt of the base [rad]: the angle between its z axis and the world's.
-pub fn tilt(world: &World) -> f64 {
-    let z = world.base_pose().rotation * Vector3::z();
-    z.z.clamp(-1.0, 1.0).acos()
-}
-
 pub fn run(args: SimArgs) -> Result<()> {
     if !(args.seconds.is_finite() && args.seconds > 0.0) {
         bail!(
@@ -151,7 +145,7 @@ pub fn run(args: SimArgs) -> Result<()> {
     let wall = Instant::now();
     for _ in 0..steps {
         world.step();
-        max_tilt = max_tilt.max(tilt(&world));
+        max_tilt = max_tilt.max(world.base_tilt());
         lowest = lowest.min(world.lowest_collider_z());
         for (_, m, r) in world.mount_errors() {
             mount_m = mount_m.max(m);

@@ -211,7 +211,7 @@ impl ArmReach {
         self.step += 1;
 
         let (position_error, orientation_error) = self.errors();
-        let (_, qd) = self.joints();
+        let (q, qd) = self.joints();
         let terms = reach_terms(
             position_error,
             orientation_error,
@@ -228,7 +228,7 @@ impl ArmReach {
         }
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
         StepOutcome {
-            observation: self.observation(),
+            observation: observation::build(&q, &qd, &self.observed_goal),
             reward: terms.total(),
             terms,
             truncated: self.step >= self.config.episode_steps,

@@ -68,6 +68,16 @@ pub fn slew(setpoint: f64, command: f64, velocity_limit: f64, dt: f64) -> f64 {
     setpoint + (command - setpoint).clamp(-max_step, max_step)
 }
 
+/// How far a velocity servo's set-point may lead its position [rad]: effort limit / stiffness,
+/// the lead at which it pushes with its full effort (0 without a position gain).
+pub fn max_lead(actuator: &Actuator) -> f64 {
+    if actuator.stiffness > 0.0 {
+        actuator.effort_limit / actuator.stiffness
+    } else {
+        0.0
+    }
+}
+
 /// Integrates a velocity command [rad/s] into a wheel's position set-point [rad], keeping it
 /// within `max_lead` [rad] of the measured position `q` (anti-windup: a blocked wheel pushes
 /// with at most its effort limit, and does not lurch forward when freed).

@@ -3,11 +3,11 @@
 use std::sync::Arc;
 
 use kumi_model::kinematics::KinematicTree;
-use kumi_model::{ActuatorMode, RobotModel};
+use kumi_model::{Actuator, ActuatorMode, RobotModel};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rapier3d::prelude::*;
 
-use crate::actuator::{clamp_command, integrate_velocity_setpoint, slew, ServoState};
+use crate::actuator::{clamp_command, integrate_velocity_setpoint, max_lead, slew, ServoState};
 use crate::config::SimConfig;
 use crate::convert::{to_na_isometry, to_na_vector, to_rapier_pose};
 use crate::error::SimError;
@@ -50,6 +50,23 @@ pub struct Snapshot {
     time_s: f64,
 }
 
+impl Snapshot {
+    fn capture(physics: &PhysicsWorld, servos: &[ServoState], time_s: f64) -> Self {
+        Self {
+            islands: physics.islands.clone(),
+            broad_phase: physics.broad_phase.clone(),
+            narrow_phase: physics.narrow_phase.clone(),
+            bodies: physics.bodies.clone(),
+            colliders: physics.colliders.clone(),
+            impulse_joints: physics.impulse_joints.clone(),
+            multibody_joints: physics.multibody_joints.clone(),
+            ccd_solver: physics.ccd_solver.clone(),
+            servos: servos.to_vec(),
+            time_s,
+        }
+    }
+}
+
 /// One robot in a rapier world with a ground plane and gravity along -z.
 pub struct World {
     model: Arc<RobotModel>,
@@ -58,12 +75,8 @@ pub struct World {
     physics: PhysicsWorld,
     links: Vec<LinkBody>,
     joints: Vec<ArticulatedJoint>,
-    modes: Vec<ActuatorMode>,
-    velocity_limits: Vec<f64>,
-    /// Position gain [N m/rad] and velocity gain [N m s/rad] of each actuator.
-    gains: Vec<(f32, f32)>,
-    /// How far a wheel's set-point may lead its position [rad]: effort limit / stiffness.
-    max_leads: Vec<f64>,
+    /// Every actuator, in the order of the per-joint vectors of this API.
+    actuators: Vec<Actuator>,
     servos: Vec<ServoState>,
     /// First actuator index of each module, and one past the last.
     module_actuators: Vec<std::ops::Range<usize>>,
@@ -113,35 +126,9 @@ impl World {
             .iter()
             .map(|a| ServoState::holding(a.mode, 0.0))
             .collect();
-        let pristine = Snapshot {
-            islands: physics.islands.clone(),
-            broad_phase: physics.broad_phase.clone(),
-            narrow_phase: physics.narrow_phase.clone(),
-            bodies: physics.bodies.clone(),
-            colliders: physics.colliders.clone(),
-            impulse_joints: physics.impulse_joints.clone(),
-            multibody_joints: physics.multibody_joints.clone(),
-            ccd_solver: physics.ccd_solver.clone(),
-            servos: servos.clone(),
-            time_s: 0.0,
-        };
+        let pristine = Snapshot::capture(&physics, &servos, 0.0);
         let mut world = Self {
-            modes: actuators.iter().map(|a| a.mode).collect(),
-            velocity_limits: actuators.iter().map(|a| a.velocity_limit).collect(),
-            gains: actuators
-                .iter()
-                .map(|a| (a.stiffness as f32, a.damping as f32))
-                .collect(),
-            max_leads: actuators
-                .iter()
-                .map(|a| {
-                    if a.stiffness > 0.0 {
-                        a.effort_limit / a.stiffness
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
+            actuators,
             model,
             config,
             tree,
@@ -271,7 +258,7 @@ impl World {
             self.joints.len(),
             "one joint position per actuator"
         );
-        self.restore(&self.pristine.clone());
+        self.restore_owned(self.pristine.clone());
         let base = if self.model.fixed_base {
             Isometry3::identity()
         } else {
@@ -312,31 +299,23 @@ impl World {
         }
         // Arms hold the configuration; wheels start braked, holding their angle.
         for (i, servo) in self.servos.iter_mut().enumerate() {
-            *servo = ServoState::holding(self.modes[i], state.joint_positions[i]);
+            *servo = ServoState::holding(self.actuators[i].mode, state.joint_positions[i]);
         }
         self.time_s = 0.0;
     }
 
     /// A copy of the full physics state.
     pub fn snapshot(&self) -> Snapshot {
-        Snapshot {
-            islands: self.physics.islands.clone(),
-            broad_phase: self.physics.broad_phase.clone(),
-            narrow_phase: self.physics.narrow_phase.clone(),
-            bodies: self.physics.bodies.clone(),
-            colliders: self.physics.colliders.clone(),
-            impulse_joints: self.physics.impulse_joints.clone(),
-            multibody_joints: self.physics.multibody_joints.clone(),
-            ccd_solver: self.physics.ccd_solver.clone(),
-            servos: self.servos.clone(),
-            time_s: self.time_s,
-        }
+        Snapshot::capture(&self.physics, &self.servos, self.time_s)
     }
 
     /// Restores a snapshot taken from this world: the trajectory from here on is bit-identical
     /// to the one that followed the snapshot.
     pub fn restore(&mut self, snapshot: &Snapshot) {
-        let s = snapshot.clone();
+        self.restore_owned(snapshot.clone());
+    }
+
+    fn restore_owned(&mut self, s: Snapshot) {
         self.physics.islands = s.islands;
         self.physics.broad_phase = s.broad_phase;
         self.physics.narrow_phase = s.narrow_phase;
@@ -360,9 +339,9 @@ impl World {
     /// velocity limit.
     pub fn set_wheel_velocity(&mut self, module: &str, velocity: f64) -> Result<(), SimError> {
         let range = self.module_range(module)?;
-        let n = self.modes[range]
+        let n = self.actuators[range]
             .iter()
-            .filter(|m| **m == ActuatorMode::Velocity)
+            .filter(|a| a.mode == ActuatorMode::Velocity)
             .count();
         self.set_module_commands(module, ActuatorMode::Velocity, &vec![velocity; n])
     }
@@ -374,7 +353,7 @@ impl World {
         values: &[f64],
     ) -> Result<(), SimError> {
         let range = self.module_range(module)?;
-        let indices: Vec<usize> = range.filter(|&i| self.modes[i] == mode).collect();
+        let indices: Vec<usize> = range.filter(|&i| self.actuators[i].mode == mode).collect();
         if indices.is_empty() {
             return Err(SimError::WrongModuleKind {
                 module: module.to_string(),
@@ -391,15 +370,14 @@ impl World {
                 got: values.len(),
             });
         }
-        let actuators: Vec<_> = self.model.actuators().collect();
         let mut clamped = Vec::with_capacity(values.len());
         for (&i, &v) in indices.iter().zip(values) {
-            clamped.push(
-                clamp_command(actuators[i], v).ok_or_else(|| SimError::NonFinite {
+            clamped.push(clamp_command(&self.actuators[i], v).ok_or_else(|| {
+                SimError::NonFinite {
                     module: module.to_string(),
                     value: v,
-                })?,
-            );
+                }
+            })?);
         }
         for (&i, v) in indices.iter().zip(clamped) {
             self.servos[i].command = v;
@@ -418,17 +396,18 @@ impl World {
         for _ in 0..self.config.substeps {
             for (i, joint) in self.joints.iter().enumerate() {
                 let servo = &mut self.servos[i];
-                let (stiffness, damping) = self.gains[i];
+                let actuator = &self.actuators[i];
+                let (stiffness, damping) = (actuator.stiffness as f32, actuator.damping as f32);
                 let (mb, link_id) = self
                     .physics
                     .multibody_joints
                     .get_mut_internal(joint.handle)
                     .expect("actuated joints are multibody joints");
                 let joint = &mut mb.link_mut(link_id).expect("link exists").joint;
-                match self.modes[i] {
+                match actuator.mode {
                     ActuatorMode::Position => {
                         servo.setpoint =
-                            slew(servo.setpoint, servo.command, self.velocity_limits[i], dt);
+                            slew(servo.setpoint, servo.command, actuator.velocity_limit, dt);
                         joint.data.set_motor_position(
                             JointAxis::AngX,
                             servo.setpoint as f32,
@@ -442,7 +421,7 @@ impl World {
                             servo.setpoint,
                             servo.command,
                             q,
-                            self.max_leads[i],
+                            max_lead(actuator),
                             dt,
                         );
                         joint.data.set_motor(
@@ -480,6 +459,12 @@ impl World {
                 f64::from(mb.joint_velocity(mb.link(id).expect("exists"))[0])
             })
             .collect()
+    }
+
+    /// Tilt of the base [rad]: the angle between its z axis and the world's.
+    pub fn base_tilt(&self) -> f64 {
+        let z = self.base_pose().rotation * Vector3::z();
+        z.z.clamp(-1.0, 1.0).acos()
     }
 
     /// The world pose of any URDF link (the `ee` tool frames included).

@@ -5,7 +5,6 @@ use std::sync::Arc;
 
 use kumi_model::{assemble, load_morphology, ActuatorMode, ModuleLibrary, RobotModel};
 use kumi_sim::{SimConfig, World};
-use nalgebra::Vector3;
 
 pub fn model(name: &str) -> Arc<RobotModel> {
     let library = ModuleLibrary::shipped();
@@ -65,12 +64,6 @@ pub fn random_commands(world: &mut World, rng: &mut Rng) {
             world.set_wheel_velocity(&m.name, v).unwrap();
         }
     }
-}
-
-/// Tilt of the base [rad]: angle between its z axis and the world's.
-pub fn tilt(world: &World) -> f64 {
-    let z = world.base_pose().rotation * Vector3::z();
-    z.z.clamp(-1.0, 1.0).acos()
 }
 
 /// Every number that describes the world's state, as bits: for exact comparisons.
