@@ -1,7 +1,9 @@
 //! `kumi`: the front door to every kumi tool.
 
+mod arm;
 mod bench;
 mod bridge;
+mod eval;
 mod sim;
 mod train;
 
@@ -32,10 +34,17 @@ enum Command {
     Sim(sim::SimArgs),
     /// Run the sim bridge node: the simulated robot on ROS 2 (stop with Ctrl-C).
     SimBridge(bridge::BridgeArgs),
+    /// Run the arm-module node: the shared low-level skill for one arm module (stop with Ctrl-C).
+    Arm(arm::ArmArgs),
     /// Train policies with PPO.
     Train {
         #[command(subcommand)]
         what: train::TrainCommand,
+    },
+    /// Evaluate trained policies.
+    Eval {
+        #[command(subcommand)]
+        what: eval::EvalCommand,
     },
     /// Benchmarks.
     Bench {
@@ -77,7 +86,9 @@ fn run() -> Result<()> {
         }
         Command::Sim(args) => sim::run(args),
         Command::SimBridge(args) => bridge::run(args),
+        Command::Arm(args) => arm::run(args),
         Command::Train { what } => train::run(what),
+        Command::Eval { what } => eval::run(what),
         Command::Bench { what } => bench::run(what),
     }
 }

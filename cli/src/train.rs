@@ -51,7 +51,7 @@ const CHECKPOINT_EVERY: usize = 10;
 
 const SHIPPED_CONFIG: &str = include_str!("../../train/configs/arm_reach.toml");
 
-const COLUMNS: [&str; 15] = [
+const COLUMNS: [&str; 16] = [
     "iteration",
     "env_steps",
     "collect_steps_per_s",
@@ -66,6 +66,7 @@ const COLUMNS: [&str; 15] = [
     "approx_kl",
     "clip_fraction",
     "action_std",
+    "learning_rate",
     "wall_s",
 ];
 
@@ -85,6 +86,7 @@ fn row(s: &IterationStats, wall_s: f64) -> String {
         s.approx_kl,
         s.clip_fraction,
         s.action_std,
+        s.learning_rate,
         wall_s,
     ];
     v.iter()
@@ -183,15 +185,11 @@ pub fn run(what: TrainCommand) -> Result<()> {
     eprintln!("checkpoint in {}", checkpoint.display());
 
     // The deterministic actor, normalisation included, with the skill's metadata.
-    let arm = &model.modules[0];
-    let prefix = format!("{}/", arm.name);
-    let joints: Vec<&str> = arm
-        .position_joints()
-        .map(|a| a.joint.trim_start_matches(prefix.as_str()))
-        .collect();
-    let metadata = kumi_policies::metadata::arm_reach(
-        &joints,
+    let metadata = kumi_policies::skill::ArmSkill::new(
+        &model.modules[0],
         kumi_sim::SimConfig::for_model(&model).control_hz,
+    )?
+    .metadata(
         &kumi_policies::metadata::fingerprint(&text),
         trainer.env_steps,
     );

@@ -3,12 +3,14 @@
 //! in deployment (SPEC section 4, the paper's Table I).
 //!
 //! - [`observation`]: the 21-value observation and its builder.
-//! - [`action`]: from the policy's 7 outputs to joint increments [rad].
+//! - [`skill`]: the skill's contract with an arm module (joint order, limits, action scale)
+//!   and from the policy's 7 outputs to joint increments [rad].
+//! - [`metadata`]: the keys an exported policy carries.
 //! - [`goal`]: goal sampling in the arm base frame, and per-step goal noise.
 //! - [`rotation`]: the orientation error (the quaternion log map).
 
-pub mod action;
 pub mod goal;
 pub mod metadata;
 pub mod observation;
 pub mod rotation;
+pub mod skill;

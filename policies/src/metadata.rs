@@ -1,9 +1,7 @@
-//! The metadata an exported skill carries in its ONNX `metadata_props`: the contract between the
-//! exporter (training) and the runtime (the arm-module node), defined once. A runtime compares
-//! these with the module it is asked to drive and refuses a mismatch.
-
-use crate::action::INCREMENT_SCALE;
-use crate::observation::{JOINTS, OBSERVATION_DIM, OBSERVATION_NAMES};
+//! The keys an exported skill carries in its ONNX `metadata_props`: the contract between the
+//! exporter (training) and the runtime (evaluation, the arm-module node), defined once. The
+//! values come from [`crate::skill::ArmSkill::metadata`]; [`crate::skill::ArmSkill::check`]
+//! compares them with the module a policy is asked to drive.
 
 /// Format tag of the low-level arm-reaching skill.
 pub const ARM_REACH_FORMAT: &str = "kumi-skill/arm-reach/1";
@@ -13,6 +11,7 @@ pub const OBSERVATION: &str = "kumi.observation";
 pub const OBSERVATION_DIM_KEY: &str = "kumi.observation_dim";
 pub const ACTION_DIM_KEY: &str = "kumi.action_dim";
 pub const JOINT_NAMES: &str = "kumi.joints";
+/// Per-joint increment per control step [rad] for an action of 1, comma-separated.
 pub const ACTION_SCALE: &str = "kumi.action_scale";
 pub const ACTION_CLIP: &str = "kumi.action_clip";
 pub const GOAL_FRAME: &str = "kumi.goal_frame";
@@ -20,35 +19,20 @@ pub const CONTROL_HZ: &str = "kumi.control_hz";
 pub const CONFIG_HASH: &str = "kumi.config_hash";
 pub const ENV_STEPS: &str = "kumi.env_steps";
 
-/// The arm skill's metadata. `joints` are the module's joint names in order (unprefixed),
-/// `config_hash` identifies the training config, `env_steps` how long it trained.
-pub fn arm_reach(
-    joints: &[&str],
-    control_hz: f64,
-    config_hash: &str,
-    env_steps: u64,
-) -> Vec<(String, String)> {
-    assert_eq!(joints.len(), JOINTS, "an arm module has {JOINTS} joints");
-    [
-        (FORMAT, ARM_REACH_FORMAT.to_string()),
-        (OBSERVATION, OBSERVATION_NAMES.join(",")),
-        (OBSERVATION_DIM_KEY, OBSERVATION_DIM.to_string()),
-        (ACTION_DIM_KEY, JOINTS.to_string()),
-        (JOINT_NAMES, joints.join(",")),
-        (ACTION_SCALE, INCREMENT_SCALE.to_string()),
-        (ACTION_CLIP, "1".to_string()),
-        (
-            GOAL_FRAME,
-            "arm base frame: origin at the mount face, z along the arm; goal quaternion (w, x, y, z) with w >= 0 for the tool frame, whose x axis points out of the arm".to_string(),
-        ),
-        (CONTROL_HZ, control_hz.to_string()),
-        (CONFIG_HASH, config_hash.to_string()),
-        (ENV_STEPS, env_steps.to_string()),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k.to_string(), v))
-    .collect()
-}
+/// The keys a policy must match to drive a module, in the order they are checked.
+pub const CONTRACT_KEYS: [&str; 8] = [
+    FORMAT,
+    OBSERVATION_DIM_KEY,
+    ACTION_DIM_KEY,
+    OBSERVATION,
+    JOINT_NAMES,
+    ACTION_SCALE,
+    ACTION_CLIP,
+    CONTROL_HZ,
+];
+
+/// What the goal frame is, for people reading a policy file.
+pub const GOAL_FRAME_TEXT: &str = "arm base frame: origin at the mount face, z along the arm; goal quaternion (w, x, y, z) with w >= 0 for the tool frame, whose x axis points out of the arm";
 
 /// FNV-1a (64 bit) of a text, as 16 hex digits: a stable fingerprint of a training config.
 pub fn fingerprint(text: &str) -> String {
@@ -69,22 +53,5 @@ mod tests {
         // Published FNV-1a 64 test vectors.
         assert_eq!(fingerprint(""), "cbf29ce484222325");
         assert_eq!(fingerprint("a"), "af63dc4c8601ec8c");
-    }
-
-    #[test]
-    fn arm_metadata_names_the_layout() {
-        let joints = [
-            "joint1", "joint2", "joint3", "joint4", "joint5", "joint6", "joint7",
-        ];
-        let m = arm_reach(&joints, 30.0, "abc", 480000);
-        let get = |k: &str| m.iter().find(|(key, _)| key == k).map(|(_, v)| v.as_str());
-        assert_eq!(get(FORMAT), Some(ARM_REACH_FORMAT));
-        assert_eq!(get(OBSERVATION_DIM_KEY), Some("21"));
-        assert_eq!(get(ACTION_SCALE), Some("0.05"));
-        assert!(get(OBSERVATION).unwrap().starts_with("q1,q2,"));
-        assert_eq!(
-            get(JOINT_NAMES),
-            Some("joint1,joint2,joint3,joint4,joint5,joint6,joint7")
-        );
     }
 }

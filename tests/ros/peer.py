@@ -281,6 +281,106 @@ def cmd_lockstep(args, peer):
     return {"trajectory": trajectory, "steps_per_s": (len(trajectory) - 1) / wall if wall > 0 else 0.0}
 
 
+def goal_msg(values, frame=""):
+    x, y, z, qw, qx, qy, qz = values
+    msg = PoseStamped()
+    msg.header.frame_id = frame
+    msg.pose.position = Point(x=x, y=y, z=z)
+    msg.pose.orientation = Quaternion(w=qw, x=qx, y=qy, z=qz)
+    return msg
+
+
+def cmd_reach(args, peer):
+    """Sends one goal to an arm node running against a lockstep bridge; reports the tool pose
+    after --drive-seconds of simulated time."""
+    r, a = args.robot, args.arm
+    ee_topic = f"/{r}/{a}/ee_pose"
+    peer.listen(PoseStamped, ee_topic)
+    peer.listen(Clock, "/clock")
+    goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
+    if not peer.spin_until(lambda: ee_topic in peer.latest and "/clock" in peer.latest and goal.get_subscription_count() > 0, args.timeout):
+        return {"error": "arm node or bridge not found"}
+    sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
+    start = sim()
+    goal.publish(goal_msg([float(v) for v in args.goal.split(",")], args.frame))
+    peer.spin_until(lambda: sim() >= start + args.drive_seconds, args.timeout)
+    ee = peer.latest[ee_topic]
+    p, o = ee.pose.position, ee.pose.orientation
+    return {"start": start, "end": sim(), "position": [p.x, p.y, p.z], "orientation": [o.w, o.x, o.y, o.z],
+            "frame": ee.header.frame_id}
+
+
+def cmd_armnode(args, peer):
+    """Plays the robot for an arm node (wall time, no /clock): publishes joint states at 30 Hz
+    and goals, and records what the node commands."""
+    r, a = args.robot, args.arm
+    inc_topic = f"/{r}/{a}/joint_increments"
+    peer.listen(Float64MultiArray, inc_topic)
+    js = peer.create_publisher(JointState, f"/{r}/{a}/joint_states", DEFAULT)
+    goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
+    names = [f"{a}/joint{i}" for i in range(1, 8)]
+    q = [0.1, 0.3, -0.2, 0.5, 0.0, 0.2, 0.1]
+    state = {"publish": True, "names": names}
+
+    def integrate(m):
+        # A kinematic robot: the joints go where the increments send them.
+        if len(m.data) == len(q):
+            for i, d in enumerate(m.data):
+                q[i] += d
+
+    peer.create_subscription(Float64MultiArray, inc_topic, integrate, DEFAULT)
+
+    def send_state():
+        if state["publish"]:
+            m = JointState()
+            m.name = state["names"]
+            m.position = q[:len(state["names"])]
+            m.velocity = [0.0] * len(state["names"])
+            js.publish(m)
+
+    peer.create_timer(1.0 / 30.0, send_state)
+    if not peer.spin_until(lambda: inc_topic in peer.latest and goal.get_subscription_count() > 0, args.timeout):
+        return {"error": "arm node not found"}
+
+    def phase(seconds):
+        """Increments seen over `seconds`: the largest magnitude and how many messages."""
+        seen = []
+        deadline = time.monotonic() + seconds
+        last = None
+        while time.monotonic() < deadline:
+            rclpy.spin_once(peer, timeout_sec=0.01)
+            m = peer.latest.get(inc_topic)
+            if m is not None and peer.latest[inc_topic + "#count"] != last:
+                last = peer.latest[inc_topic + "#count"]
+                seen.append(max(abs(v) for v in m.data) if m.data else -1.0)
+        # Only the second half counts: the first lets the node catch up.
+        tail = seen[len(seen) // 2:]
+        return {"messages": len(seen), "max_abs": max(tail) if tail else None}
+
+    good = [0.4, 0.1, 1.0, 1.0, 0.0, 0.0, 0.0]
+    out = {"no_goal": phase(1.0)}
+    bad = {
+        "nan": goal_msg([float("nan"), 0.0, 1.0, 1.0, 0.0, 0.0, 0.0]),
+        "zero_quaternion": goal_msg([0.4, 0.1, 1.0, 0.0, 0.0, 0.0, 0.0]),
+        "unknown_frame": goal_msg(good, "map"),
+        "out_of_reach": goal_msg([5.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0]),
+    }
+    for kind, msg in bad.items():
+        goal.publish(msg)
+        out["bad_" + kind] = phase(0.6)
+    goal.publish(goal_msg([good[0], good[1], good[2], 1.02, 0.0, 0.0, 0.0]))  # near-unit: normalised
+    out["good_goal"] = phase(1.0)
+    goal.publish(bad["nan"])
+    out["nan_after_good"] = phase(1.0)
+    state["names"] = names[:6]  # wrong size: one joint missing
+    out["missing_joint"] = phase(1.0)
+    state["names"] = names
+    out["recovered"] = phase(1.0)
+    state["publish"] = False
+    out["stale"] = phase(1.0)
+    return out
+
+
 def cmd_badinput(args, peer):
     r = args.robot
     js_topic = f"/{r}/{args.arm}/joint_states"
@@ -376,6 +476,8 @@ def main():
     p.add_argument("--kind", default="")
     p.add_argument("--timeout", type=float, default=15.0)
     p.add_argument("--linger", type=float, default=2.0)
+    p.add_argument("--goal", default="")
+    p.add_argument("--frame", default="")
     args = p.parse_args()
     if args.command == "latency":
         args.samples = int(args.samples or 50)
@@ -385,6 +487,7 @@ def main():
         out = {
             "observe": cmd_observe, "drive": cmd_drive, "late": cmd_late, "roundtrip": cmd_roundtrip,
             "lockstep": cmd_lockstep, "badinput": cmd_badinput, "latency": cmd_latency,
+            "reach": cmd_reach, "armnode": cmd_armnode,
         }[args.command](args, peer)
     finally:
         peer.destroy_node()

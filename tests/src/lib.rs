@@ -160,3 +160,78 @@ pub fn peer(domain: u16, args: &[&str], deadline: Duration) -> serde_json::Value
     serde_json::from_str(last)
         .unwrap_or_else(|e| panic!("peer printed no JSON ({e}):\n{stdout}\n{stderr}"))
 }
+
+/// The ONNX Runtime shared library from the PyPI `onnxruntime` wheel in `target/rosvenv`
+/// (installed by `.ci/run`), or `ORT_DYLIB_PATH` when set. Fails, never skips, when missing.
+pub fn onnxruntime_library() -> PathBuf {
+    if let Some(p) = std::env::var_os("ORT_DYLIB_PATH").filter(|p| !p.is_empty()) {
+        return PathBuf::from(p);
+    }
+    let lib = workspace().join("target/rosvenv/lib");
+    let found = std::fs::read_dir(&lib).ok().and_then(|pythons| {
+        pythons.flatten().find_map(|python| {
+            let capi = python.path().join("site-packages/onnxruntime/capi");
+            std::fs::read_dir(capi).ok()?.flatten().find_map(|f| {
+                let name = f.file_name().to_string_lossy().into_owned();
+                name.starts_with("libonnxruntime.so.").then(|| f.path())
+            })
+        })
+    });
+    found.unwrap_or_else(|| {
+        panic!(
+            "no libonnxruntime.so.* under {}/python3*/site-packages/onnxruntime/capi: run \
+             `bash .ci/run`, or `target/rosvenv/bin/pip install onnxruntime` (or set ORT_DYLIB_PATH)",
+            lib.display()
+        )
+    })
+}
+
+/// An arm-module node running in a thread; stopped when dropped.
+pub struct ArmNode {
+    shutdown: Arc<AtomicBool>,
+    handle: Option<JoinHandle<Result<(), kumi_arm_node::ArmNodeError>>>,
+}
+
+impl ArmNode {
+    /// Starts the node for `module` of the shipped `morphology`, named `robot`, on `domain`,
+    /// with the shipped policy (tract backend) and increments output.
+    pub fn start(morphology: &str, robot: &str, module: &str, domain: u16) -> Self {
+        let library = ModuleLibrary::shipped();
+        let model = Arc::new(assemble(
+            &load_morphology(morphology, &library).unwrap(),
+            &library,
+        ));
+        let config = kumi_arm_node::ArmNodeConfig {
+            model,
+            robot: robot.to_string(),
+            module: module.to_string(),
+            policy: kumi_runtime::shipped_arm_policy(),
+            backend: kumi_runtime::BackendChoice::Tract,
+            output: kumi_arm_node::Output::Increments,
+            domain_id: domain,
+            clock: kumi_arm_node::ClockSource::Auto,
+            stale_after_s: 0.2,
+        };
+        let shutdown = Arc::new(AtomicBool::new(false));
+        let flag = shutdown.clone();
+        let handle = std::thread::spawn(move || kumi_arm_node::run(config, flag));
+        Self {
+            shutdown,
+            handle: Some(handle),
+        }
+    }
+
+    /// Whether the node is still running.
+    pub fn alive(&self) -> bool {
+        self.handle.as_ref().is_some_and(|h| !h.is_finished())
+    }
+}
+
+impl Drop for ArmNode {
+    fn drop(&mut self) {
+        self.shutdown.store(true, Ordering::Relaxed);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}

@@ -5,10 +5,10 @@
 use std::sync::Arc;
 
 use kumi_model::{Actuator, ActuatorMode, RobotModel};
-use kumi_policies::action;
 use kumi_policies::goal::{GoalNoise, GoalRange};
 use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::rotation::orientation_error;
+use kumi_policies::skill::{ArmSkill, SkillError};
 use kumi_sim::{apply_increments, RobotState, SimConfig, SimError, World};
 use nalgebra::Isometry3;
 use rand::{Rng, SeedableRng};
@@ -50,6 +50,8 @@ impl Default for ArmReachConfig {
 pub enum EnvError {
     #[error(transparent)]
     Sim(#[from] SimError),
+    #[error(transparent)]
+    Skill(#[from] SkillError),
     #[error("the arm-reach environment needs a fixed-base robot with one 7-joint arm module and a tool frame; `{0}` is not one")]
     NotASingleArm(String),
 }
@@ -77,6 +79,7 @@ pub struct ArmReach {
     ee_link: String,
     base_link: String,
     actuators: Vec<Actuator>,
+    skill: ArmSkill,
     config: ArmReachConfig,
     rng: ChaCha8Rng,
     goal: Goal,
@@ -108,7 +111,9 @@ impl ArmReach {
             return Err(not_arm());
         }
         let ee_link = arm.ee_link.clone().ok_or_else(not_arm)?;
-        let world = World::new(model.clone(), SimConfig::for_model(&model))?;
+        let sim = SimConfig::for_model(&model);
+        let skill = ArmSkill::new(arm, sim.control_hz)?;
+        let world = World::new(model.clone(), sim)?;
         let goal = Goal {
             position_b: Default::default(),
             orientation_b: Default::default(),
@@ -118,6 +123,7 @@ impl ArmReach {
             base_link: arm.root_link.clone(),
             ee_link,
             actuators,
+            skill,
             world,
             config,
             rng: ChaCha8Rng::seed_from_u64(seed),
@@ -193,6 +199,21 @@ impl ArmReach {
         observation::build(&q, &qd, &self.observed_goal)
     }
 
+    /// The skill's contract with this arm (joint order, limits, action scale, control rate).
+    pub fn skill(&self) -> &ArmSkill {
+        &self.skill
+    }
+
+    /// The simulated world (read-only), e.g. to rebuild an observation from its state.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The goal as the policy sees it this step (with this step's noise).
+    pub fn observed_goal(&self) -> Goal {
+        self.observed_goal
+    }
+
     /// The goal the policy is reaching for (noise-free).
     pub fn goal(&self) -> Goal {
         self.goal
@@ -200,7 +221,7 @@ impl ArmReach {
 
     /// Applies one action (7 values in [-1, 1], clipped), steps the physics one control step.
     pub fn step(&mut self, act: &[f32; JOINTS]) -> StepOutcome {
-        let increments = action::increments(act);
+        let increments = self.skill.increments(act);
         let actuators: Vec<&Actuator> = self.actuators.iter().collect();
         self.targets = apply_increments(&self.targets, &increments, &actuators)
             .expect("increments are finite, lengths match");

@@ -77,11 +77,11 @@ fn node(
     }
 }
 
-/// The actor as an ONNX model. `metadata` becomes `metadata_props`, sorted by key.
+/// The actor as an ONNX model. `metadata` becomes `metadata_props` (sorted by key).
 pub fn actor_model(
     norm: &RunningNorm,
     layers: &[DenseParameters],
-    metadata: &[(String, String)],
+    metadata: &std::collections::BTreeMap<String, String>,
 ) -> ModelProto {
     let obs_dim = norm.mean.len();
     let mut initializer = vec![
@@ -147,14 +147,13 @@ pub fn actor_model(
         }
     }
     let action_dim = layers.last().map_or(0, |l| l.outputs);
-    let mut props: Vec<StringStringEntryProto> = metadata
+    let props: Vec<StringStringEntryProto> = metadata
         .iter()
         .map(|(k, v)| StringStringEntryProto {
             key: k.clone(),
             value: v.clone(),
         })
         .collect();
-    props.sort_by(|a, b| a.key.cmp(&b.key));
     ModelProto {
         ir_version: IR_VERSION,
         opset_import: vec![OperatorSetIdProto {

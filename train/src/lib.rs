@@ -6,6 +6,7 @@
 
 pub mod arm_reach;
 pub mod env;
+pub mod evaluate;
 pub mod export;
 pub mod ppo;
 pub mod reward;

@@ -1,14 +1,15 @@
 //! The low-level reaching reward (the paper's Eq. 4), as pure functions.
 //!
-//! r = w_p exp(-a_p d) + w_pf exp(-a_pf d) + w_o exp(-a_o theta) - w_a |a_t - a_{t-1}|^2 - w_v |qd|^2
+//! r = w_p exp(-a_p d) + w_pf exp(-a_pf d) + w_o exp(-a_o theta) + w_of exp(-a_of theta)
+//!     - w_a |a_t - a_{t-1}|^2 - w_v |qd|^2
 //!
 //! where d = |p_ref - p_ee| [m] and theta = 2 |log(q_ref^-1 q_ee)| is the orientation error
 //! [rad]. Two deviations from the paper's Eq. 4, both deliberate:
 //! - the paper prints the orientation term with a minus sign, which would penalise being
 //!   *aligned*; kumi rewards alignment (+ w_o exp(-a_o theta)), the evident intent;
-//! - the position term has a coarse and a fine scale (like the upper level's two tanh terms,
-//!   Table IV): one exp cannot both pull from a metre away and sharpen the last centimetres.
-//!   Set `w_pf = 0` for the paper's single term.
+//! - the position and orientation terms each have a coarse and a fine scale (like the upper
+//!   level's two tanh terms, Table IV): one exp cannot both pull from a metre (or a radian) away
+//!   and sharpen the last centimetres. Set `w_pf = w_of = 0` for the paper's single terms.
 
 /// Weights and scales of the reaching reward. Defaults are kumi's choice (the paper gives none).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -26,6 +27,10 @@ pub struct ReachWeights {
     pub w_o: f64,
     /// Orientation scale [1/rad].
     pub a_o: f64,
+    /// Fine orientation term weight.
+    pub w_of: f64,
+    /// Fine orientation scale [1/rad].
+    pub a_of: f64,
     /// Action-rate penalty weight (actions in policy units, [-1, 1] per joint).
     pub w_a: f64,
     /// Joint-velocity penalty weight [1/(rad/s)^2].
@@ -41,6 +46,8 @@ impl Default for ReachWeights {
             a_pf: 20.0,
             w_o: 1.0,
             a_o: 0.5,
+            w_of: 1.0,
+            a_of: 4.0,
             w_a: 0.01,
             w_v: 0.001,
         }
@@ -81,7 +88,8 @@ pub fn reach_terms(
     ReachTerms {
         position: w.w_p * (-w.a_p * position_error).exp()
             + w.w_pf * (-w.a_pf * position_error).exp(),
-        orientation: w.w_o * (-w.a_o * orientation_error).exp(),
+        orientation: w.w_o * (-w.a_o * orientation_error).exp()
+            + w.w_of * (-w.a_of * orientation_error).exp(),
         action_rate: -w.w_a * action_rate,
         joint_velocity: -w.w_v * speed,
     }
@@ -100,6 +108,8 @@ mod tests {
             a_pf: 0.0,
             w_o: 0.5,
             a_o: 1.0,
+            w_of: 0.0,
+            a_of: 0.0,
             w_a: 0.1,
             w_v: 0.01,
         };
@@ -120,6 +130,8 @@ mod tests {
             a_pf: 20.0,
             w_o: 0.0,
             a_o: 0.0,
+            w_of: 0.0,
+            a_of: 0.0,
             w_a: 0.0,
             w_v: 0.0,
         };
@@ -130,6 +142,25 @@ mod tests {
         let gain = reach_terms(0.01, 0.0, &[], &[], &[], &w).position - t.position;
         let coarse_only = (-0.02_f64).exp() - (-0.1_f64).exp();
         assert!(gain > 3.0 * coarse_only);
+    }
+
+    #[test]
+    fn the_fine_orientation_term_adds_a_sharp_peak() {
+        let w = ReachWeights {
+            w_p: 0.0,
+            a_p: 0.0,
+            w_pf: 0.0,
+            a_pf: 0.0,
+            w_o: 1.0,
+            a_o: 0.5,
+            w_of: 2.0,
+            a_of: 4.0,
+            w_a: 0.0,
+            w_v: 0.0,
+        };
+        // At 0.25 rad: e^-0.125 + 2 e^-1.
+        let t = reach_terms(0.0, 0.25, &[], &[], &[], &w);
+        assert!((t.orientation - ((-0.125_f64).exp() + 2.0 * (-1.0_f64).exp())).abs() < 1e-12);
     }
 
     #[test]

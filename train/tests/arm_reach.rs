@@ -3,7 +3,6 @@
 use std::sync::Arc;
 
 use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
-use kumi_policies::action::INCREMENT_SCALE;
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig, EnvError};
 
 fn model(name: &str) -> Arc<RobotModel> {
@@ -76,7 +75,7 @@ fn zero_action_holds_and_a_saturated_action_moves_one_slew_per_step() {
     }
     let moved = f64::from(out.unwrap().observation[0] - held[0]);
     assert!(
-        (moved - 10.0 * INCREMENT_SCALE).abs() < 0.02,
+        (moved - 10.0 * e.skill().increment_scale[0]).abs() < 0.02,
         "joint1 moved {moved} rad"
     );
 }

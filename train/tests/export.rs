@@ -33,10 +33,12 @@ fn onnx_actor_matches_the_training_network_to_1e_5() {
         .collect();
     norm.update(&seen.iter().map(|r| r.as_slice()).collect::<Vec<_>>());
 
-    let metadata = vec![
+    let metadata = [
         ("kumi.format".to_string(), "test".to_string()),
         ("a.first".to_string(), "1".to_string()),
-    ];
+    ]
+    .into_iter()
+    .collect();
     let bytes = encode(&actor_model(
         &norm,
         &net.actor.parameters().unwrap(),

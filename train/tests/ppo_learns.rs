@@ -134,3 +134,28 @@ fn a_checkpoint_restores_the_policy_exactly() {
     assert!(err.contains("has shape"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn without_updates_the_policy_does_not_move() {
+    // Learning rate 0: every minibatch sees the rollout's own policy, so the measured KL
+    // divergence and the clipped fraction are 0 (a check on the bookkeeping of old log-probs).
+    let mut t = trainer(3);
+    t.config.learning_rate = 0.0;
+    let mut t = Trainer::new(
+        t.config.clone(),
+        (0..8)
+            .map(|i| PointReach {
+                x: 0.0,
+                target: 0.0,
+                t: 0,
+                rng: ChaCha8Rng::seed_from_u64(i),
+            })
+            .collect(),
+    )
+    .unwrap();
+    for _ in 0..3 {
+        let s = t.iterate().unwrap();
+        assert!(s.approx_kl.abs() < 1e-6, "KL {}", s.approx_kl);
+        assert_eq!(s.clip_fraction, 0.0);
+    }
+}

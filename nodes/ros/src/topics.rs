@@ -28,6 +28,12 @@ pub fn goal_pose(robot: &str, module: &str) -> String {
     format!("/{robot}/{module}/goal_pose")
 }
 
+/// `/<robot>/<module>/ee_pose`: `geometry_msgs/PoseStamped`, the tool pose in the module's
+/// base frame, as the arm node measures it.
+pub fn ee_pose(robot: &str, module: &str) -> String {
+    format!("/{robot}/{module}/ee_pose")
+}
+
 /// `/<robot>/odom`: `nav_msgs/Odometry` of the base.
 pub fn odom(robot: &str) -> String {
     format!("/{robot}/odom")

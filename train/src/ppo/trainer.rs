@@ -30,8 +30,11 @@ pub struct PpoConfig {
     pub total_steps: u64,
     /// Hidden layer sizes of actor and critic (Table II: 256, 128).
     pub hidden: Vec<usize>,
-    /// Adam learning rate (Table II: 1e-3).
+    /// Adam learning rate (Table II: 1e-3); the starting value when `desired_kl > 0`.
     pub learning_rate: f64,
+    /// Target KL divergence per minibatch for an adaptive learning rate
+    /// ([`adapt_learning_rate`]); 0 keeps the learning rate fixed.
+    pub desired_kl: f64,
     /// Discount (Table II: 0.99).
     pub gamma: f32,
     /// GAE lambda (Table II: 0.95).
@@ -56,6 +59,7 @@ impl Default for PpoConfig {
             total_steps: 480_000,
             hidden: vec![256, 128],
             learning_rate: 1e-3,
+            desired_kl: 0.0,
             gamma: 0.99,
             lambda: 0.95,
             clip: 0.2,
@@ -91,6 +95,27 @@ pub struct IterationStats {
     pub clip_fraction: f64,
     /// Mean policy standard deviation.
     pub action_std: f64,
+    /// Adam's learning rate at the end of the iteration.
+    pub learning_rate: f64,
+}
+
+/// Bounds of the adaptive learning rate.
+const LEARNING_RATE_RANGE: (f64, f64) = (1e-5, 1e-2);
+
+/// The adaptive learning-rate rule (as in rsl_rl, the trainer behind Isaac Lab): divide by 1.5
+/// when the measured KL divergence exceeds twice the target, multiply by 1.5 when it falls
+/// below half of it, within [1e-5, 1e-2].
+pub fn adapt_learning_rate(learning_rate: f64, kl: f64, desired_kl: f64) -> f64 {
+    let (lo, hi) = LEARNING_RATE_RANGE;
+    if !kl.is_finite() || desired_kl <= 0.0 {
+        learning_rate
+    } else if kl > 2.0 * desired_kl {
+        (learning_rate / 1.5).max(lo)
+    } else if kl < 0.5 * desired_kl {
+        (learning_rate * 1.5).min(hi)
+    } else {
+        learning_rate
+    }
 }
 
 /// Errors saving or loading a checkpoint.
@@ -111,6 +136,8 @@ struct Progress {
     iteration: usize,
     env_steps: u64,
     normalizer: RunningNorm,
+    /// Adam's learning rate (it adapts when `desired_kl > 0`).
+    learning_rate: f64,
 }
 
 /// PPO over a set of environments.
@@ -311,6 +338,14 @@ impl<E: Environment> Trainer<E> {
                     &coefficients,
                 )?;
                 self.optimizer.backward_step(&loss.total)?;
+                if self.config.desired_kl > 0.0 {
+                    let lr = adapt_learning_rate(
+                        self.optimizer.learning_rate(),
+                        f64::from(loss.approx_kl),
+                        self.config.desired_kl,
+                    );
+                    self.optimizer.set_learning_rate(lr);
+                }
                 for (s, v) in sums.iter_mut().zip([
                     loss.policy,
                     loss.value,
@@ -345,6 +380,7 @@ impl<E: Environment> Trainer<E> {
             approx_kl: sums[3] / count,
             clip_fraction: sums[4] / count,
             action_std: std.iter().map(|s| f64::from(*s)).sum::<f64>() / std.len() as f64,
+            learning_rate: self.optimizer.learning_rate(),
         })
     }
 
@@ -386,6 +422,7 @@ impl<E: Environment> Trainer<E> {
             iteration: self.iteration,
             env_steps: self.env_steps,
             normalizer: self.norm.clone(),
+            learning_rate: self.optimizer.learning_rate(),
         })
         .map_err(|e| CheckpointError::Format {
             path: progress.display().to_string(),
@@ -441,6 +478,25 @@ impl<E: Environment> Trainer<E> {
         self.iteration = progress.iteration;
         self.env_steps = progress.env_steps;
         self.norm = progress.normalizer;
+        self.optimizer.set_learning_rate(progress.learning_rate);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::adapt_learning_rate;
+
+    #[test]
+    fn learning_rate_adapts_to_the_kl_divergence() {
+        // Too large a step: divide by 1.5; too small: multiply; in the band: keep.
+        assert!((adapt_learning_rate(1e-3, 0.03, 0.01) - 1e-3 / 1.5).abs() < 1e-15);
+        assert!((adapt_learning_rate(1e-3, 0.004, 0.01) - 1.5e-3).abs() < 1e-15);
+        assert_eq!(adapt_learning_rate(1e-3, 0.01, 0.01), 1e-3);
+        // Bounded, and off when no target is set or the KL is not a number.
+        assert_eq!(adapt_learning_rate(1e-5, 1.0, 0.01), 1e-5);
+        assert_eq!(adapt_learning_rate(1e-2, 0.0, 0.01), 1e-2);
+        assert_eq!(adapt_learning_rate(1e-3, 1.0, 0.0), 1e-3);
+        assert_eq!(adapt_learning_rate(1e-3, f64::NAN, 0.01), 1e-3);
     }
 }

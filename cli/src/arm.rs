@@ -1,0 +1,87 @@
+//! `kumi arm`: the arm-module node, running the shared low-level skill for one arm module.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use kumi_arm_node::{ArmNodeConfig, ClockSource, Output};
+use kumi_runtime::BackendChoice;
+
+use crate::sim::load_model;
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum OutputArg {
+    /// `joint_increments` (std_msgs/Float64MultiArray), for the sim bridge.
+    Increments,
+    /// `joint_set` (sensor_msgs/JointState, absolute targets), for MoonBot's Motion Stack.
+    JointSet,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum ClockArg {
+    /// Sim time once /clock is heard, wall time until then.
+    Auto,
+    Sim,
+    Wall,
+}
+
+#[derive(Args, Debug)]
+pub struct ArmArgs {
+    /// The arm module to drive (`arm`, `leg1`, ...).
+    pub module: String,
+    /// Robot name, the namespace of every topic (`/<robot>/<module>/...`), as given to the
+    /// sim bridge.
+    #[arg(long, default_value = "arm")]
+    pub robot: String,
+    /// The robot's morphology: `minimal`, `dragon`, `tricycle`, `arm`, or a morphology file
+    /// (default: the robot name).
+    #[arg(long)]
+    pub morphology: Option<String>,
+    /// The ONNX skill policy (default: the shipped policies/arm_reach.onnx).
+    #[arg(long)]
+    pub policy: Option<PathBuf>,
+    /// Inference backend: auto (ONNX Runtime when ORT_DYLIB_PATH is set, else tract),
+    /// onnxruntime or tract.
+    #[arg(long, default_value = "auto")]
+    pub backend: BackendChoice,
+    #[arg(long, value_enum, default_value_t = OutputArg::Increments)]
+    pub output: OutputArg,
+    #[arg(long, value_enum, default_value_t = ClockArg::Auto)]
+    pub clock: ClockArg,
+    /// Joint states older than this [s] make the node hold.
+    #[arg(long, default_value_t = 0.2)]
+    pub stale_after: f64,
+}
+
+pub fn run(args: ArmArgs) -> Result<()> {
+    if !(args.stale_after.is_finite() && args.stale_after > 0.0) {
+        bail!("--stale-after must be a positive number of seconds");
+    }
+    let model = load_model(args.morphology.as_deref().unwrap_or(&args.robot))?;
+    let config = ArmNodeConfig {
+        robot: args.robot,
+        module: args.module,
+        policy: args.policy.unwrap_or_else(kumi_runtime::shipped_arm_policy),
+        backend: args.backend,
+        output: match args.output {
+            OutputArg::Increments => Output::Increments,
+            OutputArg::JointSet => Output::JointSet,
+        },
+        domain_id: kumi_ros::domain_id_from_env()?,
+        clock: match args.clock {
+            ClockArg::Auto => ClockSource::Auto,
+            ClockArg::Sim => ClockSource::Sim,
+            ClockArg::Wall => ClockSource::Wall,
+        },
+        stale_after_s: args.stale_after,
+        model,
+    };
+    let shutdown = Arc::new(AtomicBool::new(false));
+    let flag = shutdown.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    kumi_arm_node::run(config, shutdown)?;
+    Ok(())
+}

@@ -1,0 +1,80 @@
+//! `kumi eval arm`: the shipped (or any) arm skill through the policy runtime, in the paper's
+//! protocol.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::{Args, Subcommand};
+use kumi_policies::skill::ArmSkill;
+use kumi_runtime::{BackendChoice, SkillPolicy};
+use kumi_train::arm_reach::ArmReachConfig;
+use kumi_train::evaluate::evaluate;
+
+use crate::sim::load_model;
+
+#[derive(Subcommand, Debug)]
+pub enum EvalCommand {
+    /// The low-level skill: final tool errors at the end of each 4 s goal (SPEC section 4).
+    Arm(EvalArmArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct EvalArmArgs {
+    /// The ONNX policy (default: the shipped policies/arm_reach.onnx).
+    #[arg(long)]
+    pub policy: Option<PathBuf>,
+    /// Goals to evaluate.
+    #[arg(long, default_value_t = 1000)]
+    pub rollouts: usize,
+    /// Seed of the episodes (initial joints, goals, goal noise).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Inference backend: auto (ONNX Runtime when ORT_DYLIB_PATH is set, else tract),
+    /// onnxruntime or tract.
+    #[arg(long, default_value = "auto")]
+    pub backend: BackendChoice,
+    /// Print one JSON object instead of a markdown table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(what: EvalCommand) -> Result<()> {
+    let EvalCommand::Arm(args) = what;
+    anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
+    let path = args.policy.unwrap_or_else(kumi_runtime::shipped_arm_policy);
+    let model = load_model("arm")?;
+    let skill = ArmSkill::new(
+        &model.modules[0],
+        kumi_sim::SimConfig::for_model(&model).control_hz,
+    )?;
+    // Load once here so that a bad file fails before any work, with its own message.
+    let probe = SkillPolicy::load(&path, &skill, args.backend)?;
+    eprintln!(
+        "evaluating {} ({} backend) over {} goals",
+        path.display(),
+        probe.backend(),
+        args.rollouts
+    );
+    drop(probe);
+    let start = Instant::now();
+    let result = evaluate(
+        model,
+        ArmReachConfig::default(),
+        args.rollouts,
+        args.seed,
+        || {
+            let mut policy =
+                SkillPolicy::load(&path, &skill, args.backend).map_err(|e| e.to_string())?;
+            Ok(move |obs: &_| policy.act(obs).map_err(|e| e.to_string()))
+        },
+    )
+    .context("evaluation failed")?;
+    eprintln!("done in {:.1} s", start.elapsed().as_secs_f64());
+    if args.json {
+        println!("{}", serde_json::to_string(&result)?);
+    } else {
+        print!("{}", result.markdown());
+    }
+    Ok(())
+}

@@ -1,0 +1,249 @@
+//! The arm node's control step, free of ROS: from the latest goal and joint state to the next
+//! joint targets. The observation is built by [`kumi_policies::observation::build`], the
+//! function the training environment uses, and the action is applied by
+//! [`ArmSkill::increments`] and [`kumi_sim::apply_increments`], as in training.
+
+use kumi_model::Actuator;
+use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
+use kumi_policies::skill::ArmSkill;
+use kumi_sim::apply_increments;
+
+use crate::joints::Joints;
+
+/// A policy: observation in, action (7 values in policy units) out.
+pub type PolicyFn = Box<dyn FnMut(&[f32; OBSERVATION_DIM]) -> Result<[f32; JOINTS], String> + Send>;
+
+/// Why a step held the arm still instead of running the policy.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Hold {
+    /// No goal received yet.
+    NoGoal,
+    /// No joint state received yet: nothing is commanded at all.
+    NoJointState,
+    /// The latest joint state is older than the limit [s].
+    Stale { age_s: f64 },
+    /// The policy failed (its message); the arm holds.
+    PolicyFailed(String),
+}
+
+/// What one step decided.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Command {
+    /// Increments [rad] since the previous step (zero when holding), already clamped so that
+    /// `targets` stay within the joint limits.
+    pub increments: [f64; JOINTS],
+    /// Absolute joint targets [rad]; `None` until a joint state has been seen.
+    pub targets: Option<[f64; JOINTS]>,
+    /// Set when the step held.
+    pub hold: Option<Hold>,
+    /// The observation fed to the policy, when it ran.
+    pub observation: Option<[f32; OBSERVATION_DIM]>,
+}
+
+/// One arm module's controller.
+pub struct ArmController {
+    skill: ArmSkill,
+    actuators: Vec<Actuator>,
+    policy: PolicyFn,
+    stale_after_s: f64,
+    goal: Option<Goal>,
+    joints: Option<(Joints, f64)>,
+    targets: Option<[f64; JOINTS]>,
+}
+
+impl ArmController {
+    /// A controller for the module `skill` describes, with its position `actuators` (for the
+    /// joint limits), a policy, and the joint-state age [s] beyond which it holds.
+    pub fn new(
+        skill: ArmSkill,
+        actuators: Vec<Actuator>,
+        policy: PolicyFn,
+        stale_after_s: f64,
+    ) -> Self {
+        Self {
+            skill,
+            actuators,
+            policy,
+            stale_after_s,
+            goal: None,
+            joints: None,
+            targets: None,
+        }
+    }
+
+    pub fn skill(&self) -> &ArmSkill {
+        &self.skill
+    }
+
+    /// Replaces the goal (already validated).
+    pub fn set_goal(&mut self, goal: Goal) {
+        self.goal = Some(goal);
+    }
+
+    pub fn goal(&self) -> Option<&Goal> {
+        self.goal.as_ref()
+    }
+
+    /// Records a joint state measured at `t_s` [s].
+    pub fn set_joints(&mut self, joints: Joints, t_s: f64) {
+        self.joints = Some((joints, t_s));
+    }
+
+    /// The latest joint state and when it was measured [s].
+    pub fn joints(&self) -> Option<&(Joints, f64)> {
+        self.joints.as_ref()
+    }
+
+    /// The observation the policy would see now, if there is a goal and a joint state.
+    pub fn observation(&self) -> Option<[f32; OBSERVATION_DIM]> {
+        let (j, _) = self.joints.as_ref()?;
+        Some(observation::build(&j.q, &j.qd, self.goal.as_ref()?))
+    }
+
+    fn hold(&self, why: Hold) -> Command {
+        Command {
+            increments: [0.0; JOINTS],
+            targets: self.targets,
+            hold: Some(why),
+            observation: None,
+        }
+    }
+
+    /// One control step at time `now_s` [s].
+    pub fn step(&mut self, now_s: f64) -> Command {
+        let Some((joints, t)) = self.joints else {
+            return self.hold(Hold::NoJointState);
+        };
+        // Targets start where the arm is, as in training (reset sets them to the joint angles).
+        let targets = *self.targets.get_or_insert(joints.q);
+        let age_s = now_s - t;
+        if age_s > self.stale_after_s {
+            return self.hold(Hold::Stale { age_s });
+        }
+        let Some(obs) = self.observation() else {
+            return self.hold(Hold::NoGoal);
+        };
+        let action = match (self.policy)(&obs) {
+            Ok(a) => a,
+            Err(e) => return self.hold(Hold::PolicyFailed(e)),
+        };
+        let actuators: Vec<&Actuator> = self.actuators.iter().collect();
+        let next = apply_increments(&targets, &self.skill.increments(&action), &actuators)
+            .expect("increments are finite and sized for the module");
+        let mut new_targets = [0.0; JOINTS];
+        new_targets.copy_from_slice(&next);
+        let increments = std::array::from_fn(|i| new_targets[i] - targets[i]);
+        self.targets = Some(new_targets);
+        Command {
+            increments,
+            targets: self.targets,
+            hold: None,
+            observation: Some(obs),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kumi_model::{ActuatorMode, ModuleInstance, Role};
+    use nalgebra::{UnitQuaternion, Vector3};
+
+    fn module() -> ModuleInstance {
+        ModuleInstance {
+            name: "arm".into(),
+            kind: "arm".into(),
+            role: Role::Manipulator,
+            parent: None,
+            mount_joint: None,
+            root_link: "arm/base".into(),
+            links: vec![],
+            ee_link: Some("arm/ee".into()),
+            actuators: (1..=JOINTS)
+                .map(|i| Actuator {
+                    joint: format!("arm/joint{i}"),
+                    mode: ActuatorMode::Position,
+                    stiffness: 1.0,
+                    damping: 1.0,
+                    armature: 0.0,
+                    joint_damping: 0.0,
+                    joint_friction: 0.0,
+                    effort_limit: 1.0,
+                    velocity_limit: 1.5,
+                    lower: -1.0,
+                    upper: 1.0,
+                })
+                .collect(),
+            home: vec![0.0; JOINTS],
+        }
+    }
+
+    fn controller(policy: PolicyFn) -> ArmController {
+        let m = module();
+        ArmController::new(
+            ArmSkill::new(&m, 30.0).unwrap(),
+            m.actuators.clone(),
+            policy,
+            0.2,
+        )
+    }
+
+    fn goal() -> Goal {
+        Goal {
+            position_b: Vector3::new(0.3, 0.0, 1.0),
+            orientation_b: UnitQuaternion::identity(),
+        }
+    }
+
+    fn joints(q0: f64) -> Joints {
+        Joints {
+            q: [q0; JOINTS],
+            qd: [0.0; JOINTS],
+        }
+    }
+
+    #[test]
+    fn holds_without_joint_state_or_goal() {
+        let mut c = controller(Box::new(|_| Ok([1.0; JOINTS])));
+        assert_eq!(c.step(0.0).hold, Some(Hold::NoJointState));
+        assert_eq!(c.step(0.0).targets, None);
+        c.set_joints(joints(0.25), 0.0);
+        let cmd = c.step(0.0);
+        assert_eq!(cmd.hold, Some(Hold::NoGoal));
+        assert_eq!(
+            (cmd.increments, cmd.targets),
+            ([0.0; JOINTS], Some([0.25; JOINTS]))
+        );
+    }
+
+    #[test]
+    fn runs_the_policy_and_clamps_to_the_limits() {
+        let mut c = controller(Box::new(|_| Ok([1.0, -1.0, 0.5, 0.0, 0.0, 0.0, 0.0])));
+        c.set_goal(goal());
+        c.set_joints(joints(0.98), 0.0);
+        let cmd = c.step(0.0);
+        assert!(cmd.hold.is_none());
+        // joint1 would go to 1.03: clamped at the limit 1.0, so its increment is 0.02.
+        assert!((cmd.increments[0] - 0.02).abs() < 1e-12);
+        assert!((cmd.increments[1] + 0.05).abs() < 1e-12);
+        assert!((cmd.increments[2] - 0.025).abs() < 1e-12);
+        assert_eq!(cmd.targets.unwrap()[0], 1.0);
+        // The observation is the shared builder's.
+        assert_eq!(
+            cmd.observation,
+            Some(observation::build(&[0.98; 7], &[0.0; 7], &goal()))
+        );
+    }
+
+    #[test]
+    fn stale_joint_states_and_policy_failures_hold() {
+        let mut c = controller(Box::new(|_| Err("boom".into())));
+        c.set_goal(goal());
+        c.set_joints(joints(0.0), 1.0);
+        assert_eq!(c.step(1.1).hold, Some(Hold::PolicyFailed("boom".into())));
+        let stale = c.step(1.5);
+        assert!(matches!(stale.hold, Some(Hold::Stale { age_s }) if (age_s - 0.5).abs() < 1e-12));
+        assert_eq!(stale.increments, [0.0; JOINTS]);
+        assert_eq!(stale.targets, Some([0.0; JOINTS]));
+    }
+}

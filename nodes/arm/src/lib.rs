@@ -1,0 +1,17 @@
+//! The arm-module node (SPEC section 7): one per arm module, running the shared low-level skill.
+//!
+//! - [`goal`]: validating a `geometry_msgs/PoseStamped` goal (frame, finiteness, quaternion,
+//!   workspace).
+//! - [`joints`]: reading the module's `sensor_msgs/JointState` in the skill's joint order.
+//! - [`controller`]: the pure control step: hold, or observation -> policy -> increments,
+//!   clamped to the joint limits. It builds the observation with the same function training
+//!   uses ([`kumi_policies::observation::build`]).
+//! - [`run`]: the ROS 2 shell around them.
+
+pub mod controller;
+pub mod goal;
+pub mod joints;
+pub mod run;
+
+pub use controller::{ArmController, Command, Hold};
+pub use run::{run, ArmNodeConfig, ArmNodeError, ClockSource, Output};

@@ -1,0 +1,375 @@
+//! The ROS 2 shell of the arm-module node: subscriptions in, [`ArmController`] in the middle,
+//! commands and the tool pose out.
+//!
+//! Timing: with sim time (from `/clock`), the node acts once for every new joint state, that is
+//! once per simulated control step, which is what the sim bridge's lockstep waits for; with wall
+//! time it acts at the control rate. Joint states older than `stale_after_s` (by their stamp in
+//! sim time, by their arrival in wall time) make it hold.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use kumi_model::kinematics::KinematicTree;
+use kumi_model::{Actuator, RobotModel};
+use kumi_msgs::builtin_interfaces::Time;
+use kumi_msgs::geometry_msgs::PoseStamped;
+use kumi_msgs::rosgraph_msgs::Clock;
+use kumi_msgs::sensor_msgs::JointState;
+use kumi_msgs::std_msgs::{Float64MultiArray, Header};
+use kumi_policies::observation::JOINTS;
+use kumi_policies::skill::{ArmSkill, SkillError};
+use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode};
+use kumi_runtime::{BackendChoice, RuntimeError, SkillPolicy};
+use nalgebra::Isometry3;
+use ros2_client::{Publisher, Subscription};
+use tracing::{debug, info, warn};
+
+use crate::controller::{ArmController, Hold};
+use crate::goal::GoalRules;
+use crate::joints;
+
+/// What the node publishes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// `joint_increments` (`std_msgs/Float64MultiArray`), for the sim bridge.
+    Increments,
+    /// `joint_set` (`sensor_msgs/JointState`, absolute targets), for MoonBot's Motion Stack.
+    JointSet,
+}
+
+/// Where the node's time comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ClockSource {
+    /// Sim time once a `/clock` message arrives, wall time until then.
+    Auto,
+    Sim,
+    Wall,
+}
+
+#[derive(Debug, Clone)]
+pub struct ArmNodeConfig {
+    pub model: Arc<RobotModel>,
+    /// The robot's namespace (`/<robot>/...`).
+    pub robot: String,
+    /// The arm module this node drives.
+    pub module: String,
+    pub policy: PathBuf,
+    pub backend: BackendChoice,
+    pub output: Output,
+    pub domain_id: u16,
+    pub clock: ClockSource,
+    /// Joint states older than this [s] make the node hold.
+    pub stale_after_s: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ArmNodeError {
+    #[error("robot `{robot}` has no module `{module}` (its modules: {known})")]
+    UnknownModule {
+        robot: String,
+        module: String,
+        known: String,
+    },
+    #[error(transparent)]
+    Skill(#[from] SkillError),
+    #[error(transparent)]
+    Policy(#[from] RuntimeError),
+    #[error(transparent)]
+    Ros(#[from] RosError),
+    #[error("kinematics: {0}")]
+    Kinematics(String),
+}
+
+/// The module's forward kinematics: tool pose in the module's base frame from its joints.
+struct ToolKinematics {
+    tree: KinematicTree,
+    joints: Vec<String>,
+    base: usize,
+    tool: usize,
+}
+
+impl ToolKinematics {
+    fn new(model: &RobotModel, module: &kumi_model::ModuleInstance) -> Result<Self, ArmNodeError> {
+        let tree =
+            KinematicTree::new(&model.urdf).map_err(|e| ArmNodeError::Kinematics(e.to_string()))?;
+        let link = |name: &str| {
+            tree.link_index(name)
+                .ok_or_else(|| ArmNodeError::Kinematics(format!("no link `{name}`")))
+        };
+        let base = link(&module.root_link)?;
+        let tool = link(module.ee_link.as_deref().unwrap_or_default())?;
+        Ok(Self {
+            joints: module.position_joints().map(|a| a.joint.clone()).collect(),
+            tree,
+            base,
+            tool,
+        })
+    }
+
+    fn tool_pose_b(&self, q: &[f64; JOINTS]) -> Isometry3<f64> {
+        let named = self
+            .joints
+            .iter()
+            .map(String::as_str)
+            .zip(q.iter().copied());
+        let poses = self
+            .tree
+            .forward(&Isometry3::identity(), &self.tree.positions(named));
+        poses[self.base].inverse() * poses[self.tool]
+    }
+}
+
+/// Everything a node needs that is not ROS: checked before any ROS entity is created, so a bad
+/// module, policy or model fails fast with its own message.
+pub struct Prepared {
+    pub controller: ArmController,
+    pub rules: GoalRules,
+    kinematics: ToolKinematics,
+    base_frame: String,
+    control_hz: f64,
+}
+
+impl Prepared {
+    pub fn new(config: &ArmNodeConfig) -> Result<Self, ArmNodeError> {
+        let model = &config.model;
+        let module = model
+            .module(&config.module)
+            .ok_or_else(|| ArmNodeError::UnknownModule {
+                robot: model.name.clone(),
+                module: config.module.clone(),
+                known: model
+                    .modules
+                    .iter()
+                    .map(|m| m.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            })?;
+        let control_hz = kumi_sim::SimConfig::for_model(model).control_hz;
+        let skill = ArmSkill::new(module, control_hz)?;
+        let mut policy = SkillPolicy::load(&config.policy, &skill, config.backend)?;
+        info!(
+            "{}: policy {} ({} backend)",
+            config.module,
+            config.policy.display(),
+            policy.backend()
+        );
+        let kinematics = ToolKinematics::new(model, module)?;
+        let reach = kinematics
+            .tool_pose_b(&[0.0; JOINTS])
+            .translation
+            .vector
+            .norm();
+        let actuators: Vec<Actuator> = module.position_joints().cloned().collect();
+        Ok(Self {
+            controller: ArmController::new(
+                skill,
+                actuators,
+                Box::new(move |obs| policy.act(obs).map_err(|e| e.to_string())),
+                config.stale_after_s,
+            ),
+            rules: GoalRules {
+                frames: vec![
+                    module.root_link.clone(),
+                    format!("{}/{}", config.robot, module.root_link),
+                ],
+                reach,
+            },
+            base_frame: module.root_link.clone(),
+            kinematics,
+            control_hz,
+        })
+    }
+
+    /// The tool pose [m] in the module's base frame for joint angles `q` [rad].
+    pub fn tool_pose_b(&self, q: &[f64; JOINTS]) -> Isometry3<f64> {
+        self.kinematics.tool_pose_b(q)
+    }
+}
+
+struct Io {
+    goal: Subscription<PoseStamped>,
+    joint_states: Subscription<JointState>,
+    clock: Subscription<Clock>,
+    increments: Option<Publisher<Float64MultiArray>>,
+    joint_set: Option<Publisher<JointState>>,
+    ee_pose: Publisher<PoseStamped>,
+}
+
+/// Runs the node until `shutdown` is set.
+pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNodeError> {
+    let mut prepared = Prepared::new(&config)?;
+    let (robot, module) = (config.robot.as_str(), config.module.as_str());
+    let mut node = RosNode::new(&format!("/{robot}/{module}"), "arm_node", config.domain_id)?;
+    let io = Io {
+        goal: node.subscription(&topics::goal_pose(robot, module), qos::default())?,
+        joint_states: node.subscription(&topics::joint_states(robot, module), qos::default())?,
+        clock: node.subscription(topics::CLOCK, qos::default())?,
+        increments: match config.output {
+            Output::Increments => {
+                Some(node.publisher(&topics::joint_increments(robot, module), qos::default())?)
+            }
+            Output::JointSet => None,
+        },
+        joint_set: match config.output {
+            Output::JointSet => {
+                Some(node.publisher(&topics::joint_set(robot, module), qos::default())?)
+            }
+            Output::Increments => None,
+        },
+        ee_pose: node.publisher(&topics::ee_pose(robot, module), qos::default())?,
+    };
+    info!(
+        "arm node up: /{robot}/{module}, output {:?}, clock {:?}, domain {}",
+        config.output,
+        config.clock,
+        node.domain_id()
+    );
+
+    let dt = 1.0 / prepared.control_hz;
+    let start = Instant::now();
+    let mut sim_now: Option<f64> = None;
+    let mut last_acted_stamp = f64::NEG_INFINITY;
+    let mut last_step_at = f64::NEG_INFINITY;
+    let mut log = RateLimited::new(Duration::from_secs(1));
+    let mut hold_log = RateLimited::new(Duration::from_secs(2));
+    let mut latest_stamp = Time::default();
+
+    while !shutdown.load(Ordering::Relaxed) {
+        while let Ok(Some((c, _))) = io.clock.take() {
+            if config.clock != ClockSource::Wall {
+                sim_now = Some(c.clock.seconds());
+            }
+        }
+        let sim = match config.clock {
+            ClockSource::Sim => true,
+            ClockSource::Wall => false,
+            ClockSource::Auto => sim_now.is_some(),
+        };
+        let wall_now = start.elapsed().as_secs_f64();
+        let now = if sim {
+            sim_now.unwrap_or(0.0)
+        } else {
+            wall_now
+        };
+
+        loop {
+            match io.goal.take() {
+                Ok(Some((msg, _))) => match prepared.rules.accept(&msg) {
+                    Ok(goal) => {
+                        info!(
+                            "{module}: new goal at ({:.3}, {:.3}, {:.3}) m",
+                            goal.position_b.x, goal.position_b.y, goal.position_b.z
+                        );
+                        prepared.controller.set_goal(goal);
+                    }
+                    Err(why) => warn!("{module}: goal rejected: {why}"),
+                },
+                Ok(None) => break,
+                Err(e) => {
+                    if log.check(Instant::now()).is_some() {
+                        warn!("{module}: malformed goal message dropped: {e:?}");
+                    }
+                }
+            }
+        }
+        let mut fresh = false;
+        loop {
+            match io.joint_states.take() {
+                Ok(Some((msg, _))) => {
+                    match joints::read(&msg, module, &prepared.controller.skill().joints) {
+                        Ok(j) => {
+                            let t = if sim {
+                                msg.header.stamp.seconds()
+                            } else {
+                                wall_now
+                            };
+                            if sim {
+                                // A joint state stamped in the future of /clock means the
+                                // clock has not arrived yet: it is the newest time there is.
+                                sim_now = Some(sim_now.map_or(t, |c| c.max(t)));
+                            }
+                            fresh |= t > last_acted_stamp;
+                            latest_stamp = msg.header.stamp;
+                            prepared.controller.set_joints(j, t);
+                        }
+                        Err(why) => {
+                            if let Some(n) = log.check(Instant::now()) {
+                                warn!(
+                                    "{module}: joint state rejected: {why} ({n} more suppressed)"
+                                );
+                            }
+                        }
+                    }
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    if log.check(Instant::now()).is_some() {
+                        warn!("{module}: malformed joint state dropped: {e:?}");
+                    }
+                }
+            }
+        }
+        let now = if sim { sim_now.unwrap_or(now) } else { now };
+
+        // Sim time: once per new joint state, or once per control period of /clock if the
+        // joint states stopped (to hold). Wall time: at the control rate.
+        let due = if sim {
+            fresh || now - last_step_at >= dt - 1e-9
+        } else {
+            now - last_step_at >= dt
+        };
+        if due {
+            last_step_at = now;
+            if let Some((_, t)) = prepared.controller.joints() {
+                last_acted_stamp = *t;
+            }
+            let cmd = prepared.controller.step(now);
+            match &cmd.hold {
+                Some(Hold::Stale { age_s }) => {
+                    if hold_log.check(Instant::now()).is_some() {
+                        warn!("{module}: joint states are {age_s:.2} s old; holding");
+                    }
+                }
+                Some(Hold::PolicyFailed(e)) => {
+                    if hold_log.check(Instant::now()).is_some() {
+                        warn!("{module}: policy failed ({e}); holding");
+                    }
+                }
+                Some(h) => debug!("{module}: holding: {h:?}"),
+                None => {}
+            }
+            if let Some(targets) = cmd.targets {
+                if let Some(p) = &io.increments {
+                    let _ = p.publish(Float64MultiArray::vector("joints", cmd.increments.to_vec()));
+                }
+                if let Some(p) = &io.joint_set {
+                    let _ = p.publish(JointState {
+                        header: Header {
+                            stamp: Time::from_seconds(now),
+                            frame_id: String::new(),
+                        },
+                        name: prepared.controller.skill().joints.clone(),
+                        position: targets.to_vec(),
+                        velocity: Vec::new(),
+                        effort: Vec::new(),
+                    });
+                }
+            }
+            if let Some((j, _)) = prepared.controller.joints() {
+                let pose = prepared.tool_pose_b(&j.q);
+                let _ = io.ee_pose.publish(PoseStamped {
+                    header: Header {
+                        stamp: latest_stamp,
+                        frame_id: prepared.base_frame.clone(),
+                    },
+                    pose: geometry::pose(&pose),
+                });
+            }
+        }
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    info!("arm node /{robot}/{module} stopping");
+    Ok(())
+}

@@ -1,0 +1,24 @@
+//! Runs an exported skill policy: reads the ONNX file, checks its metadata and its input and
+//! output shapes against the module it is asked to drive (a mismatch is an error, never a
+//! silently wrong layout), then infers with one of two backends:
+//!
+//! - [`Backend::OnnxRuntime`]: ONNX Runtime through `ort`, loaded at run time from the shared
+//!   library named by `ORT_DYLIB_PATH` (the PyPI `onnxruntime` wheel ships it as
+//!   `onnxruntime/capi/libonnxruntime.so.<version>`);
+//! - [`Backend::Tract`]: tract, pure Rust, always available.
+//!
+//! [`BackendChoice::Auto`] takes ONNX Runtime when `ORT_DYLIB_PATH` is set and tract otherwise.
+
+mod model_file;
+mod onnxruntime;
+mod policy;
+mod tract;
+
+pub use model_file::{ModelFile, TensorShape};
+pub use onnxruntime::{ort_library_from_env, ORT_DYLIB_PATH};
+pub use policy::{Backend, BackendChoice, RuntimeError, SkillPolicy};
+
+/// The shipped low-level skill, `policies/arm_reach.onnx` in the source tree.
+pub fn shipped_arm_policy() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../arm_reach.onnx")
+}

@@ -1,0 +1,272 @@
+//! The arm skill's contract with the module it drives, derived once from the robot model and
+//! the control rate: joint order, joint ranges and the action scale. Training, evaluation and
+//! the arm-module node all build one from the same model, and an exported policy carries it in
+//! its metadata, so a policy trained for other joints, limits or rates is refused, not run.
+
+use std::collections::BTreeMap;
+
+use kumi_model::{ActuatorMode, ModuleInstance};
+
+use crate::metadata;
+use crate::observation::{JOINTS, OBSERVATION_DIM, OBSERVATION_NAMES};
+
+/// The skill's view of one arm module.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmSkill {
+    /// The module's name in its robot (`arm`, `leg2`).
+    pub module: String,
+    /// Joint names in policy order, without the module prefix (`joint1` .. `joint7`).
+    pub joints: Vec<String>,
+    /// Lower and upper joint limits [rad].
+    pub lower: [f64; JOINTS],
+    pub upper: [f64; JOINTS],
+    /// Largest increment per control step [rad] for each joint: the velocity limit [rad/s]
+    /// divided by the control rate, so a saturated action asks for what the joint can do in
+    /// one step.
+    pub increment_scale: [f64; JOINTS],
+    /// Control rate [Hz].
+    pub control_hz: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SkillError {
+    #[error("module `{module}` is not an arm module: the arm skill drives {JOINTS} position joints and a tool frame, it has {positions} position joints, {velocities} velocity joints and {tool}")]
+    NotAnArm {
+        module: String,
+        positions: usize,
+        velocities: usize,
+        tool: &'static str,
+    },
+    #[error("the control rate must be positive and finite, not {0} Hz")]
+    ControlRate(f64),
+}
+
+/// How an exported policy's metadata differs from the module it is asked to drive.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MetadataMismatch {
+    #[error("metadata `{key}` is missing: not a kumi skill policy, or exported by an older kumi")]
+    Missing { key: &'static str },
+    #[error("metadata `{key}` is `{found}`, but module `{module}` needs `{expected}`")]
+    Differs {
+        key: &'static str,
+        module: String,
+        found: String,
+        expected: String,
+    },
+}
+
+fn join<T: ToString>(values: &[T]) -> String {
+    values
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+impl ArmSkill {
+    /// The skill for `module` of an assembled robot, stepped at `control_hz` [Hz].
+    pub fn new(module: &ModuleInstance, control_hz: f64) -> Result<Self, SkillError> {
+        if !(control_hz.is_finite() && control_hz > 0.0) {
+            return Err(SkillError::ControlRate(control_hz));
+        }
+        let positions: Vec<_> = module.position_joints().collect();
+        let velocities = module
+            .actuators
+            .iter()
+            .filter(|a| a.mode == ActuatorMode::Velocity)
+            .count();
+        if positions.len() != JOINTS || velocities != 0 || module.ee_link.is_none() {
+            return Err(SkillError::NotAnArm {
+                module: module.name.clone(),
+                positions: positions.len(),
+                velocities,
+                tool: if module.ee_link.is_some() {
+                    "a tool frame"
+                } else {
+                    "no tool frame"
+                },
+            });
+        }
+        let prefix = format!("{}/", module.name);
+        let mut skill = Self {
+            module: module.name.clone(),
+            joints: positions
+                .iter()
+                .map(|a| a.joint.trim_start_matches(prefix.as_str()).to_string())
+                .collect(),
+            lower: [0.0; JOINTS],
+            upper: [0.0; JOINTS],
+            increment_scale: [0.0; JOINTS],
+            control_hz,
+        };
+        for (i, a) in positions.iter().enumerate() {
+            skill.lower[i] = a.lower;
+            skill.upper[i] = a.upper;
+            skill.increment_scale[i] = a.velocity_limit / control_hz;
+        }
+        Ok(skill)
+    }
+
+    /// The joint increments [rad] for a policy output: each value clipped to [-1, 1] and scaled
+    /// by its joint's [`Self::increment_scale`]. A non-finite output becomes 0 (hold).
+    pub fn increments(&self, action: &[f32; JOINTS]) -> [f64; JOINTS] {
+        let mut out = [0.0; JOINTS];
+        for ((o, a), scale) in out.iter_mut().zip(action).zip(&self.increment_scale) {
+            let a = f64::from(*a);
+            *o = if a.is_finite() {
+                a.clamp(-1.0, 1.0) * scale
+            } else {
+                0.0
+            };
+        }
+        out
+    }
+
+    /// The metadata an exported policy of this skill carries. `config_hash` identifies the
+    /// training config, `env_steps` how long it trained.
+    pub fn metadata(&self, config_hash: &str, env_steps: u64) -> BTreeMap<String, String> {
+        let mut m = self.contract();
+        m.insert(metadata::CONFIG_HASH.into(), config_hash.into());
+        m.insert(metadata::ENV_STEPS.into(), env_steps.to_string());
+        m.insert(
+            metadata::GOAL_FRAME.into(),
+            metadata::GOAL_FRAME_TEXT.into(),
+        );
+        m
+    }
+
+    /// The entries a policy must match to drive this module.
+    fn contract(&self) -> BTreeMap<String, String> {
+        [
+            (metadata::FORMAT, metadata::ARM_REACH_FORMAT.to_string()),
+            (metadata::OBSERVATION, OBSERVATION_NAMES.join(",")),
+            (metadata::OBSERVATION_DIM_KEY, OBSERVATION_DIM.to_string()),
+            (metadata::ACTION_DIM_KEY, JOINTS.to_string()),
+            (metadata::JOINT_NAMES, self.joints.join(",")),
+            (metadata::ACTION_SCALE, join(&self.increment_scale)),
+            (metadata::ACTION_CLIP, "1".to_string()),
+            (metadata::CONTROL_HZ, self.control_hz.to_string()),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect()
+    }
+
+    /// Checks a policy's metadata against this module: format, observation layout, sizes,
+    /// joint names and order, action scale and clip, and control rate must all agree.
+    pub fn check(&self, found: &BTreeMap<String, String>) -> Result<(), MetadataMismatch> {
+        // Keys are checked in a fixed order so that the first error names the root cause
+        // (a foreign file fails on its format, not on some later key).
+        for key in metadata::CONTRACT_KEYS {
+            let expected = &self.contract()[key];
+            match found.get(key) {
+                None => return Err(MetadataMismatch::Missing { key }),
+                Some(v) if v != expected => {
+                    return Err(MetadataMismatch::Differs {
+                        key,
+                        module: self.module.clone(),
+                        found: v.clone(),
+                        expected: expected.clone(),
+                    })
+                }
+                Some(_) => {}
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kumi_model::{Actuator, Role};
+
+    fn arm(velocity_limit: f64) -> ModuleInstance {
+        let actuators = (1..=JOINTS)
+            .map(|i| Actuator {
+                joint: format!("leg1/joint{i}"),
+                mode: ActuatorMode::Position,
+                stiffness: 1.0,
+                damping: 1.0,
+                armature: 0.0,
+                joint_damping: 0.0,
+                joint_friction: 0.0,
+                effort_limit: 10.0,
+                velocity_limit,
+                lower: -2.0,
+                upper: 2.0,
+            })
+            .collect();
+        ModuleInstance {
+            name: "leg1".into(),
+            kind: "arm".into(),
+            role: Role::Leg,
+            parent: None,
+            mount_joint: None,
+            root_link: "leg1/base".into(),
+            links: vec![],
+            ee_link: Some("leg1/ee".into()),
+            actuators,
+            home: vec![0.0; JOINTS],
+        }
+    }
+
+    #[test]
+    fn scale_is_velocity_limit_over_control_rate() {
+        let skill = ArmSkill::new(&arm(1.5), 30.0).unwrap();
+        assert_eq!(skill.joints[0], "joint1");
+        assert!((skill.increment_scale[3] - 0.05).abs() < 1e-15);
+        let inc = skill.increments(&[0.5, -0.5, 2.0, -3.0, 0.0, f32::NAN, f32::INFINITY]);
+        assert_eq!(inc, [0.025, -0.025, 0.05, -0.05, 0.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn a_policy_for_this_module_passes_its_own_check() {
+        let skill = ArmSkill::new(&arm(1.5), 30.0).unwrap();
+        let m = skill.metadata("abc", 10);
+        assert_eq!(
+            m[metadata::ACTION_SCALE],
+            "0.05,0.05,0.05,0.05,0.05,0.05,0.05"
+        );
+        assert_eq!(m[metadata::OBSERVATION_DIM_KEY], "21");
+        assert_eq!(skill.check(&m), Ok(()));
+    }
+
+    #[test]
+    fn mismatches_name_the_key_and_both_values() {
+        let skill = ArmSkill::new(&arm(1.5), 30.0).unwrap();
+        let trained = skill.metadata("abc", 10);
+        // Another control rate changes the scale and the rate: the scale is reported first.
+        let other = ArmSkill::new(&arm(1.5), 60.0).unwrap();
+        let err = other.check(&trained).unwrap_err().to_string();
+        assert!(
+            err.contains("kumi.action_scale") && err.contains("0.025"),
+            "{err}"
+        );
+        // A missing key and a foreign format.
+        let mut m = trained.clone();
+        m.remove(metadata::JOINT_NAMES);
+        assert_eq!(
+            skill.check(&m),
+            Err(MetadataMismatch::Missing {
+                key: metadata::JOINT_NAMES
+            })
+        );
+        let mut m = trained;
+        m.insert(metadata::FORMAT.into(), "something-else".into());
+        assert!(skill
+            .check(&m)
+            .unwrap_err()
+            .to_string()
+            .contains("`something-else`"));
+    }
+
+    #[test]
+    fn wheels_are_not_arms() {
+        let mut m = arm(1.5);
+        m.actuators[6].mode = ActuatorMode::Velocity;
+        let err = ArmSkill::new(&m, 30.0).unwrap_err().to_string();
+        assert!(err.contains("6 position joints, 1 velocity"), "{err}");
+        assert!(ArmSkill::new(&arm(1.5), 0.0).is_err());
+    }
+}

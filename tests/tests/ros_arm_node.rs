@@ -1,0 +1,105 @@
+//! The arm-module node over real ROS 2 with a real rclpy peer: it reaches a goal through the
+//! sim bridge in lockstep, and it rejects bad input without losing its state.
+
+use std::time::Duration;
+
+use kumi_sim_bridge::Mode;
+use kumi_tests::{fresh_domain, peer, ArmNode, Bridge};
+use serde_json::Value;
+
+/// A goal inside the training distribution (SPEC section 4: position box, pitch within pi/3,
+/// yaw 0): x, y, z [m], then the quaternion w, x, y, z (roll 0.5 rad about the tool's x axis).
+const GOAL: [f64; 7] = [0.35, 0.1, 1.0, 0.968_912_4, 0.247_403_96, 0.0, 0.0];
+
+#[test]
+fn an_rclpy_goal_is_reached_within_5_cm_in_4_s_of_sim_time() {
+    let domain = fresh_domain();
+    let bridge = Bridge::start(
+        "arm",
+        domain,
+        Mode::Lockstep {
+            timeout: Duration::from_secs(2),
+        },
+    );
+    let node = ArmNode::start("arm", "arm", "arm", domain);
+    let goal: Vec<String> = GOAL.iter().map(|v| v.to_string()).collect();
+    let out = peer(
+        domain,
+        &[
+            "reach",
+            "--robot",
+            "arm",
+            "--arm",
+            "arm",
+            "--goal",
+            &goal.join(","),
+            "--drive-seconds",
+            "4",
+            "--timeout",
+            "60",
+        ],
+        Duration::from_secs(90),
+    );
+    assert!(node.alive() && bridge.alive(), "a node stopped: {out}");
+    drop(node);
+    bridge.stop().unwrap();
+    assert!(out.get("error").is_none(), "{out}");
+    let sim_s = out["end"].as_f64().unwrap() - out["start"].as_f64().unwrap();
+    assert!((4.0..4.5).contains(&sim_s), "ran {sim_s} s of sim time");
+    let p: Vec<f64> = out["position"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let error =
+        ((p[0] - GOAL[0]).powi(2) + (p[1] - GOAL[1]).powi(2) + (p[2] - GOAL[2]).powi(2)).sqrt();
+    assert!(error < 0.05, "tool ended {error:.3} m from the goal: {out}");
+    assert_eq!(out["frame"], "arm/base", "{out}");
+}
+
+fn max_abs(out: &Value, phase: &str) -> f64 {
+    out[phase]["max_abs"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("phase {phase} saw no increments: {out}"))
+}
+
+#[test]
+fn bad_input_is_rejected_and_the_node_holds_without_losing_its_goal() {
+    let domain = fresh_domain();
+    let node = ArmNode::start("arm", "arm", "arm", domain);
+    let out = peer(
+        domain,
+        &[
+            "armnode",
+            "--robot",
+            "arm",
+            "--arm",
+            "arm",
+            "--timeout",
+            "30",
+        ],
+        Duration::from_secs(60),
+    );
+    assert!(out.get("error").is_none(), "{out}");
+    assert!(node.alive(), "the node stopped: {out}");
+    // Holding is exact: zero increments, still published at the control rate.
+    assert_eq!(max_abs(&out, "no_goal"), 0.0, "{out}");
+    assert!(out["no_goal"]["messages"].as_u64().unwrap() >= 15, "{out}");
+    for bad in ["nan", "zero_quaternion", "unknown_frame", "out_of_reach"] {
+        assert_eq!(
+            max_abs(&out, &format!("bad_{bad}")),
+            0.0,
+            "{bad} goal was acted on: {out}"
+        );
+    }
+    // A near-unit quaternion is normalised and the goal pursued; a NaN goal after it is
+    // rejected and the good goal kept.
+    assert!(max_abs(&out, "good_goal") > 0.0, "{out}");
+    assert!(max_abs(&out, "nan_after_good") > 0.0, "{out}");
+    // Joint states without joint7 are refused, so the last good one goes stale: hold.
+    assert_eq!(max_abs(&out, "missing_joint"), 0.0, "{out}");
+    assert!(max_abs(&out, "recovered") > 0.0, "{out}");
+    // No joint states at all: stale after 0.2 s, hold.
+    assert_eq!(max_abs(&out, "stale"), 0.0, "{out}");
+}

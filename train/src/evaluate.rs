@@ -1,0 +1,175 @@
+//! The low-level skill's evaluation (the paper's protocol, section IV-A): the tool's position
+//! and orientation errors at the end of each 4 s goal, over many goals.
+//!
+//! Episodes are the training environment's own (random initial joints, three goals of 4 s,
+//! goal noise as in training); every goal end is one rollout, so later goals start wherever the
+//! arm was left. Episode `k` is seeded by `(seed, k)`, so results do not depend on how many
+//! threads run them.
+
+use std::sync::Arc;
+
+use kumi_model::RobotModel;
+use kumi_policies::observation::{JOINTS, OBSERVATION_DIM};
+use rayon::prelude::*;
+
+use crate::arm_reach::{ArmReach, ArmReachConfig, EnvError};
+
+/// Summary of one error over all rollouts.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ErrorStats {
+    pub mean: f64,
+    /// Population standard deviation.
+    pub std: f64,
+    pub median: f64,
+    /// 90th percentile (nearest rank).
+    pub p90: f64,
+}
+
+impl ErrorStats {
+    /// The summary of `values` (NaN everywhere if empty).
+    pub fn of(values: &[f64]) -> Self {
+        if values.is_empty() {
+            return Self {
+                mean: f64::NAN,
+                std: f64::NAN,
+                median: f64::NAN,
+                p90: f64::NAN,
+            };
+        }
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let mut sorted = values.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let median = if sorted.len() % 2 == 1 {
+            sorted[sorted.len() / 2]
+        } else {
+            0.5 * (sorted[sorted.len() / 2 - 1] + sorted[sorted.len() / 2])
+        };
+        // Nearest rank: the smallest value with at least 90 % of the values at or below it.
+        let rank = ((0.9 * n).ceil() as usize).clamp(1, sorted.len());
+        Self {
+            mean,
+            std,
+            median,
+            p90: sorted[rank - 1],
+        }
+    }
+}
+
+/// The evaluation's result, as `kumi eval arm --json` prints it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Evaluation {
+    pub rollouts: usize,
+    pub position_error_m: ErrorStats,
+    pub orientation_error_rad: ErrorStats,
+}
+
+impl Evaluation {
+    /// The result as a markdown table.
+    pub fn markdown(&self) -> String {
+        let row = |name: &str, s: &ErrorStats| {
+            format!(
+                "| {name} | {:.4} | {:.4} | {:.4} | {:.4} |\n",
+                s.mean, s.std, s.median, s.p90
+            )
+        };
+        format!(
+            "| final error ({} rollouts) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}",
+            self.rollouts,
+            row("position [m]", &self.position_error_m),
+            row("orientation [rad]", &self.orientation_error_rad),
+        )
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    #[error(transparent)]
+    Env(#[from] EnvError),
+    #[error("the policy failed: {0}")]
+    Policy(String),
+}
+
+/// Evaluates a policy over `rollouts` goals. `make_policy` builds one policy instance per
+/// worker thread; a policy maps an observation to an action (or fails with a message).
+pub fn evaluate<P, F>(
+    model: Arc<RobotModel>,
+    config: ArmReachConfig,
+    rollouts: usize,
+    seed: u64,
+    make_policy: F,
+) -> Result<Evaluation, EvalError>
+where
+    F: Fn() -> Result<P, String> + Sync,
+    P: FnMut(&[f32; OBSERVATION_DIM]) -> Result<[f32; JOINTS], String>,
+{
+    let goals_per_episode = (config.episode_steps / config.goal_period_steps).max(1);
+    let episodes = rollouts.div_ceil(goals_per_episode);
+    let per_episode: Vec<Vec<(f64, f64)>> = (0..episodes)
+        .into_par_iter()
+        .map_init(
+            || make_policy().map_err(EvalError::Policy),
+            |policy, k| {
+                let policy = policy
+                    .as_mut()
+                    .map_err(|e| EvalError::Policy(e.to_string()))?;
+                let episode_seed = seed.wrapping_mul(1_000_003).wrapping_add(k as u64);
+                let mut env = ArmReach::new(model.clone(), config, episode_seed)?;
+                let mut obs = env.reset();
+                let mut ends = Vec::with_capacity(goals_per_episode);
+                for _ in 0..config.episode_steps {
+                    let action = policy(&obs).map_err(EvalError::Policy)?;
+                    let out = env.step(&action);
+                    if out.goal_ended {
+                        ends.push((out.position_error, out.orientation_error));
+                    }
+                    obs = out.observation;
+                }
+                Ok(ends)
+            },
+        )
+        .collect::<Result<_, EvalError>>()?;
+    let ends: Vec<(f64, f64)> = per_episode.into_iter().flatten().take(rollouts).collect();
+    let (p, o): (Vec<f64>, Vec<f64>) = ends.iter().copied().unzip();
+    Ok(Evaluation {
+        rollouts: ends.len(),
+        position_error_m: ErrorStats::of(&p),
+        orientation_error_rad: ErrorStats::of(&o),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stats_by_hand() {
+        let s = ErrorStats::of(&[4.0, 1.0, 3.0, 2.0]);
+        assert_eq!(s.mean, 2.5);
+        assert!((s.std - 1.25_f64.sqrt()).abs() < 1e-12); // mean squared deviation 1.25
+        assert_eq!(s.median, 2.5);
+        assert_eq!(s.p90, 4.0); // rank ceil(3.6) = 4
+        let ten: Vec<f64> = (1..=10).map(f64::from).collect();
+        let s = ErrorStats::of(&ten);
+        assert_eq!((s.median, s.p90), (5.5, 9.0)); // rank ceil(9.0) = 9
+        assert_eq!(ErrorStats::of(&[7.0]).p90, 7.0);
+        assert!(ErrorStats::of(&[]).mean.is_nan());
+    }
+
+    #[test]
+    fn json_has_the_documented_shape() {
+        let e = Evaluation {
+            rollouts: 2,
+            position_error_m: ErrorStats::of(&[0.1, 0.3]),
+            orientation_error_rad: ErrorStats::of(&[0.5, 0.5]),
+        };
+        let v: serde_json::Value = serde_json::to_value(&e).unwrap();
+        assert_eq!(v["rollouts"], 2);
+        for key in ["mean", "std", "median", "p90"] {
+            assert!(v["position_error_m"][key].is_number(), "{key}");
+            assert!(v["orientation_error_rad"][key].is_number(), "{key}");
+        }
+        assert!(e.markdown().contains("| position [m] | 0.2000 | 0.1000 |"));
+    }
+}
