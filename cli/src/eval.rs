@@ -50,13 +50,34 @@ pub fn run(what: EvalCommand) -> Result<()> {
     )?;
     // Load once here so that a bad file fails before any work, with its own message.
     let probe = SkillPolicy::load(&path, &skill, args.backend)?;
-    eprintln!(
-        "evaluating {} ({} backend) over {} goals",
-        path.display(),
-        probe.backend(),
-        args.rollouts
+    let backend = probe.backend();
+    let meta = |key: &str| {
+        probe
+            .metadata()
+            .get(key)
+            .cloned()
+            .unwrap_or_else(|| "?".into())
+    };
+    // Relative to the working directory when inside it, so reports do not carry a home path.
+    let shown = std::env::current_dir()
+        .ok()
+        .and_then(|cwd| path.strip_prefix(cwd).ok().map(|p| p.display().to_string()))
+        .unwrap_or_else(|| path.display().to_string());
+    let provenance = format!(
+        "- policy: `{}` (trained for {} environment steps, config fingerprint {})\n- protocol: {} goals, each held 4 s (120 steps at {} Hz) in 12 s episodes from random initial joints, goal noise as in training; error at the end of each goal; episode seed {}\n- inference: {backend} backend\n",
+        shown,
+        meta(kumi_policies::metadata::ENV_STEPS),
+        meta(kumi_policies::metadata::CONFIG_HASH),
+        args.rollouts,
+        skill.control_hz,
+        args.seed,
     );
     drop(probe);
+    eprintln!(
+        "evaluating {} ({backend} backend) over {} goals",
+        path.display(),
+        args.rollouts
+    );
     let start = Instant::now();
     let result = evaluate(
         model,
@@ -74,7 +95,10 @@ pub fn run(what: EvalCommand) -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string(&result)?);
     } else {
-        print!("{}", result.markdown());
+        print!(
+            "# Arm-reach skill: evaluation\n\n{provenance}\n{}",
+            result.markdown()
+        );
     }
     Ok(())
 }

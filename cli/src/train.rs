@@ -6,12 +6,13 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig};
 use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
 use kumi_train::reward::ReachWeights;
 
 /// The training config file: PPO hyperparameters and the reward's weights.
-#[derive(Debug, serde::Deserialize)]
+#[derive(Debug, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 struct TrainArmConfig {
     ppo: PpoConfig,
@@ -48,6 +49,8 @@ pub struct TrainArmArgs {
 
 /// Iterations between checkpoints.
 const CHECKPOINT_EVERY: usize = 10;
+/// Iterations between progress lines when stderr is not a terminal.
+const LOG_EVERY: usize = 5;
 
 const SHIPPED_CONFIG: &str = include_str!("../../train/configs/arm_reach.toml");
 
@@ -125,6 +128,11 @@ pub fn run(what: TrainCommand) -> Result<()> {
     {
         bail!("num_envs, rollout_steps, epochs and minibatches must be positive");
     }
+    // What is trained, overrides included: its fingerprint goes into the policy's metadata.
+    let trained = TrainArmConfig {
+        ppo: config.clone(),
+        reward: file.reward,
+    };
     let model = load_model("arm")?;
     let envs = (0..config.num_envs)
         .map(|i| {
@@ -161,26 +169,44 @@ pub fn run(what: TrainCommand) -> Result<()> {
         "training the arm-reaching skill for {total} steps; metrics in {}",
         csv_path.display()
     );
+    // A live bar on a terminal; on a pipe or file (CI, nohup) a line every few iterations.
+    let bar = ProgressBar::new(total).with_style(
+        ProgressStyle::with_template(
+            "{bar:30} {pos}/{len} steps [{elapsed_precise} < {eta_precise}] {msg}",
+        )
+        .expect("a valid template"),
+    );
+    bar.set_position(trainer.env_steps);
     while trainer.env_steps < total {
         let s = trainer.iterate()?;
         let wall = start.elapsed().as_secs_f64();
         writeln!(csv, "{}", row(&s, wall))?;
-        eprintln!(
-            "[{:>5.1}%] steps {:>7}/{total} | {:>5.0} steps/s collect, {:>6.0} samples/s update | reward/step {:>6.3} | final error {:.3} m, {:.3} rad | std {:.3} | {:.0} s",
-            100.0 * s.env_steps as f64 / total as f64,
-            s.env_steps,
+        let status = format!(
+            "{:.0} steps/s collect, {:.0} samples/s update | reward/step {:.3} | final error {:.3} m, {:.3} rad | std {:.3}",
             s.collect_steps_per_s,
             s.update_samples_per_s,
             s.mean_step_reward,
             s.final_position_error,
             s.final_orientation_error,
             s.action_std,
-            wall
         );
+        bar.set_position(s.env_steps.min(total));
+        if bar.is_hidden() {
+            if s.iteration.is_multiple_of(LOG_EVERY) || s.env_steps >= total {
+                eprintln!(
+                    "[{:>5.1}%] steps {:>8}/{total} | {status} | {wall:.0} s",
+                    100.0 * s.env_steps as f64 / total as f64,
+                    s.env_steps,
+                );
+            }
+        } else {
+            bar.set_message(status);
+        }
         if s.iteration.is_multiple_of(CHECKPOINT_EVERY) {
             trainer.save_checkpoint(&checkpoint)?;
         }
     }
+    bar.finish();
     trainer.save_checkpoint(&checkpoint)?;
     eprintln!("checkpoint in {}", checkpoint.display());
 
@@ -190,7 +216,8 @@ pub fn run(what: TrainCommand) -> Result<()> {
         kumi_sim::SimConfig::for_model(&model).control_hz,
     )?
     .metadata(
-        &kumi_policies::metadata::fingerprint(&text),
+        // Of the values, not the text: comments and layout do not change what was trained.
+        &kumi_policies::metadata::fingerprint(&serde_json::to_string(&trained)?),
         trainer.env_steps,
     );
     let onnx =

@@ -191,3 +191,54 @@ fn train_refuses_a_config_with_unknown_fields() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+#[test]
+fn eval_arm_prints_the_documented_json() {
+    let out = kumi(&[
+        "eval",
+        "arm",
+        "--rollouts",
+        "6",
+        "--backend",
+        "tract",
+        "--json",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("tract backend"), "{stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["rollouts"], 6);
+    for error in ["position_error_m", "orientation_error_rad"] {
+        for stat in ["mean", "std", "median", "p90"] {
+            let x = v[error][stat].as_f64().unwrap();
+            assert!(x.is_finite() && x >= 0.0, "{error}.{stat} = {x}");
+        }
+    }
+}
+
+#[test]
+fn eval_arm_refuses_a_file_that_is_not_a_policy() {
+    let path = std::env::temp_dir().join(format!("kumi-not-policy-{}.onnx", std::process::id()));
+    std::fs::write(&path, b"hello").unwrap();
+    let out = kumi(&["eval", "arm", "--policy", path.to_str().unwrap()]);
+    std::fs::remove_file(&path).unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("not an ONNX model"), "{stderr}");
+}
+
+#[test]
+fn arm_node_names_the_modules_it_could_drive() {
+    let out = kumi(&["arm", "leg9", "--robot", "tricycle"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("robot `tricycle` has no module `leg9`") && stderr.contains("leg1"),
+        "{stderr}"
+    );
+    // A wheel module is not an arm.
+    let out = kumi(&["arm", "wheel1", "--robot", "tricycle"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("not an arm module"), "{stderr}");
+}

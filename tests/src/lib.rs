@@ -194,8 +194,14 @@ pub struct ArmNode {
 
 impl ArmNode {
     /// Starts the node for `module` of the shipped `morphology`, named `robot`, on `domain`,
-    /// with the shipped policy (tract backend) and increments output.
-    pub fn start(morphology: &str, robot: &str, module: &str, domain: u16) -> Self {
+    /// with the shipped policy (tract backend).
+    pub fn start(
+        morphology: &str,
+        robot: &str,
+        module: &str,
+        domain: u16,
+        output: kumi_arm_node::Output,
+    ) -> Self {
         let library = ModuleLibrary::shipped();
         let model = Arc::new(assemble(
             &load_morphology(morphology, &library).unwrap(),
@@ -207,7 +213,7 @@ impl ArmNode {
             module: module.to_string(),
             policy: kumi_runtime::shipped_arm_policy(),
             backend: kumi_runtime::BackendChoice::Tract,
-            output: kumi_arm_node::Output::Increments,
+            output,
             domain_id: domain,
             clock: kumi_arm_node::ClockSource::Auto,
             stale_after_s: 0.2,

@@ -188,6 +188,6 @@ fn the_shipped_policy_drives_every_arm_module_of_every_morphology() {
             driven.push(format!("{name}/{}", module.name));
         }
     }
-    // The arm alone, Minimal's two arms, Dragon's two, Tricycle's three.
+    // Every arm module of the four shipped robots (Tricycle alone has four).
     assert!(driven.len() >= 8, "{driven:?}");
 }

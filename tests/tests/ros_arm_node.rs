@@ -3,6 +3,7 @@
 
 use std::time::Duration;
 
+use kumi_arm_node::Output;
 use kumi_sim_bridge::Mode;
 use kumi_tests::{fresh_domain, peer, ArmNode, Bridge};
 use serde_json::Value;
@@ -13,6 +14,15 @@ const GOAL: [f64; 7] = [0.35, 0.1, 1.0, 0.968_912_4, 0.247_403_96, 0.0, 0.0];
 
 #[test]
 fn an_rclpy_goal_is_reached_within_5_cm_in_4_s_of_sim_time() {
+    reach(Output::Increments);
+}
+
+#[test]
+fn with_motion_stack_output_the_goal_is_reached_too() {
+    reach(Output::JointSet);
+}
+
+fn reach(output: Output) {
     let domain = fresh_domain();
     let bridge = Bridge::start(
         "arm",
@@ -21,7 +31,7 @@ fn an_rclpy_goal_is_reached_within_5_cm_in_4_s_of_sim_time() {
             timeout: Duration::from_secs(2),
         },
     );
-    let node = ArmNode::start("arm", "arm", "arm", domain);
+    let node = ArmNode::start("arm", "arm", "arm", domain, output);
     let goal: Vec<String> = GOAL.iter().map(|v| v.to_string()).collect();
     let out = peer(
         domain,
@@ -54,6 +64,7 @@ fn an_rclpy_goal_is_reached_within_5_cm_in_4_s_of_sim_time() {
         .collect();
     let error =
         ((p[0] - GOAL[0]).powi(2) + (p[1] - GOAL[1]).powi(2) + (p[2] - GOAL[2]).powi(2)).sqrt();
+    eprintln!("{output:?}: tool ended {error:.4} m from the goal after {sim_s:.2} s of sim time");
     assert!(error < 0.05, "tool ended {error:.3} m from the goal: {out}");
     assert_eq!(out["frame"], "arm/base", "{out}");
 }
@@ -67,7 +78,7 @@ fn max_abs(out: &Value, phase: &str) -> f64 {
 #[test]
 fn bad_input_is_rejected_and_the_node_holds_without_losing_its_goal() {
     let domain = fresh_domain();
-    let node = ArmNode::start("arm", "arm", "arm", domain);
+    let node = ArmNode::start("arm", "arm", "arm", domain, Output::Increments);
     let out = peer(
         domain,
         &[

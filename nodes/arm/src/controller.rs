@@ -218,7 +218,7 @@ mod tests {
 
     #[test]
     fn runs_the_policy_and_clamps_to_the_limits() {
-        let mut c = controller(Box::new(|_| Ok([1.0, -1.0, 0.5, 0.0, 0.0, 0.0, 0.0])));
+        let mut c = controller(Box::new(|_| Ok([1.0, -1.0, -0.5, 0.0, 0.0, 0.0, 0.0])));
         c.set_goal(goal());
         c.set_joints(joints(0.98), 0.0);
         let cmd = c.step(0.0);
@@ -226,7 +226,7 @@ mod tests {
         // joint1 would go to 1.03: clamped at the limit 1.0, so its increment is 0.02.
         assert!((cmd.increments[0] - 0.02).abs() < 1e-12);
         assert!((cmd.increments[1] + 0.05).abs() < 1e-12);
-        assert!((cmd.increments[2] - 0.025).abs() < 1e-12);
+        assert!((cmd.increments[2] + 0.025).abs() < 1e-12);
         assert_eq!(cmd.targets.unwrap()[0], 1.0);
         // The observation is the shared builder's.
         assert_eq!(

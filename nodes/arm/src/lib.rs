@@ -6,12 +6,14 @@
 //! - [`controller`]: the pure control step: hold, or observation -> policy -> increments,
 //!   clamped to the joint limits. It builds the observation with the same function training
 //!   uses ([`kumi_policies::observation::build`]).
+//! - [`schedule`]: when the node acts (sim time or wall time).
 //! - [`run`]: the ROS 2 shell around them.
 
 pub mod controller;
 pub mod goal;
 pub mod joints;
 pub mod run;
+pub mod schedule;
 
 pub use controller::{ArmController, Command, Hold};
 pub use run::{run, ArmNodeConfig, ArmNodeError, ClockSource, Output};

@@ -1,10 +1,8 @@
 //! The ROS 2 shell of the arm-module node: subscriptions in, [`ArmController`] in the middle,
 //! commands and the tool pose out.
 //!
-//! Timing: with sim time (from `/clock`), the node acts once for every new joint state, that is
-//! once per simulated control step, which is what the sim bridge's lockstep waits for; with wall
-//! time it acts at the control rate. Joint states older than `stale_after_s` (by their stamp in
-//! sim time, by their arrival in wall time) make it hold.
+//! Timing is [`Schedule`]'s. Joint states older than `stale_after_s` (by their stamp in sim
+//! time, by their arrival in wall time) make it hold.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -29,6 +27,7 @@ use tracing::{debug, info, warn};
 use crate::controller::{ArmController, Hold};
 use crate::goal::GoalRules;
 use crate::joints;
+use crate::schedule::Schedule;
 
 /// What the node publishes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -227,11 +226,9 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         node.domain_id()
     );
 
-    let dt = 1.0 / prepared.control_hz;
     let start = Instant::now();
+    let mut schedule = Schedule::new(prepared.control_hz);
     let mut sim_now: Option<f64> = None;
-    let mut last_acted_stamp = f64::NEG_INFINITY;
-    let mut last_step_at = f64::NEG_INFINITY;
     let mut log = RateLimited::new(Duration::from_secs(1));
     let mut hold_log = RateLimited::new(Duration::from_secs(2));
     let mut latest_stamp = Time::default();
@@ -247,6 +244,9 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
             ClockSource::Wall => false,
             ClockSource::Auto => sim_now.is_some(),
         };
+        if schedule.use_sim_time(sim) && sim {
+            info!("{module}: using sim time from /clock");
+        }
         let wall_now = start.elapsed().as_secs_f64();
         let now = if sim {
             sim_now.unwrap_or(0.0)
@@ -274,7 +274,6 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                 }
             }
         }
-        let mut fresh = false;
         loop {
             match io.joint_states.take() {
                 Ok(Some((msg, _))) => {
@@ -290,7 +289,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                                 // clock has not arrived yet: it is the newest time there is.
                                 sim_now = Some(sim_now.map_or(t, |c| c.max(t)));
                             }
-                            fresh |= t > last_acted_stamp;
+                            schedule.joint_state(t);
                             latest_stamp = msg.header.stamp;
                             prepared.controller.set_joints(j, t);
                         }
@@ -313,32 +312,24 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         }
         let now = if sim { sim_now.unwrap_or(now) } else { now };
 
-        // Sim time: once per new joint state, or once per control period of /clock if the
-        // joint states stopped (to hold). Wall time: at the control rate.
-        let due = if sim {
-            fresh || now - last_step_at >= dt - 1e-9
-        } else {
-            now - last_step_at >= dt
-        };
-        if due {
-            last_step_at = now;
-            if let Some((_, t)) = prepared.controller.joints() {
-                last_acted_stamp = *t;
-            }
+        let measured_at = prepared.controller.joints().map(|(_, t)| *t);
+        if schedule.due(now, measured_at) {
             let cmd = prepared.controller.step(now);
-            match &cmd.hold {
+            let warning = match &cmd.hold {
                 Some(Hold::Stale { age_s }) => {
-                    if hold_log.check(Instant::now()).is_some() {
-                        warn!("{module}: joint states are {age_s:.2} s old; holding");
-                    }
+                    Some(format!("joint states are {age_s:.2} s old; holding"))
                 }
-                Some(Hold::PolicyFailed(e)) => {
-                    if hold_log.check(Instant::now()).is_some() {
-                        warn!("{module}: policy failed ({e}); holding");
-                    }
+                Some(Hold::PolicyFailed(e)) => Some(format!("policy failed ({e}); holding")),
+                Some(h) => {
+                    debug!("{module}: holding: {h:?}");
+                    None
                 }
-                Some(h) => debug!("{module}: holding: {h:?}"),
-                None => {}
+                None => None,
+            };
+            if let Some(w) = warning {
+                if hold_log.check(Instant::now()).is_some() {
+                    warn!("{module}: {w}");
+                }
             }
             if let Some(targets) = cmd.targets {
                 if let Some(p) = &io.increments {

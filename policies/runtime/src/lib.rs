@@ -20,5 +20,9 @@ pub use policy::{Backend, BackendChoice, RuntimeError, SkillPolicy};
 
 /// The shipped low-level skill, `policies/arm_reach.onnx` in the source tree.
 pub fn shipped_arm_policy() -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../arm_reach.onnx")
+    let runtime_crate = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    runtime_crate
+        .parent()
+        .unwrap_or(runtime_crate)
+        .join("arm_reach.onnx")
 }

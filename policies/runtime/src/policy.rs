@@ -84,7 +84,7 @@ pub enum RuntimeError {
     Metadata {
         path: String,
         module: String,
-        source: MetadataMismatch,
+        source: Box<MetadataMismatch>,
     },
     #[error("{path}: {what} has shape {found}, the arm skill needs {expected}")]
     Shape {
@@ -183,7 +183,7 @@ impl SkillPolicy {
             .map_err(|source| RuntimeError::Metadata {
                 path: label.to_string(),
                 module: skill.module.clone(),
-                source,
+                source: Box::new(source),
             })?;
         check_shapes(label, &file)?;
         let backend = choice.resolve();

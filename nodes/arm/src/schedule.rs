@@ -1,0 +1,114 @@
+//! When the arm node acts, as a pure state machine.
+//!
+//! Sim time: once per new joint state (once per simulated control step, what the bridge's
+//! lockstep waits for), or once per control period of `/clock` when joint states stop (to
+//! publish holds). Wall time: at the control rate. Switching time base forgets the times kept
+//! so far: comparing sim seconds with wall seconds would stall the node.
+
+/// The node's schedule.
+#[derive(Debug, Clone)]
+pub struct Schedule {
+    period_s: f64,
+    sim: bool,
+    last_acted_stamp: f64,
+    last_step_at: f64,
+    fresh: bool,
+}
+
+impl Schedule {
+    /// A schedule at `control_hz` [Hz], starting in wall time.
+    pub fn new(control_hz: f64) -> Self {
+        Self {
+            period_s: 1.0 / control_hz,
+            sim: false,
+            last_acted_stamp: f64::NEG_INFINITY,
+            last_step_at: f64::NEG_INFINITY,
+            fresh: false,
+        }
+    }
+
+    /// Sets the time base; returns true when it changed.
+    pub fn use_sim_time(&mut self, sim: bool) -> bool {
+        if sim == self.sim {
+            return false;
+        }
+        self.sim = sim;
+        self.last_acted_stamp = f64::NEG_INFINITY;
+        self.last_step_at = f64::NEG_INFINITY;
+        self.fresh = false;
+        true
+    }
+
+    pub fn sim(&self) -> bool {
+        self.sim
+    }
+
+    /// A joint state measured at `t` [s] (in the current time base) arrived.
+    pub fn joint_state(&mut self, t: f64) {
+        self.fresh |= t > self.last_acted_stamp;
+    }
+
+    /// Whether to act at `now` [s]; if so, records it, with `measured_at` the time of the
+    /// joint state acted on.
+    pub fn due(&mut self, now: f64, measured_at: Option<f64>) -> bool {
+        // A tolerance of 1e-9 s absorbs rounding in stamps built from step counts.
+        let period_elapsed = now - self.last_step_at >= self.period_s - 1e-9;
+        let due = if self.sim {
+            self.fresh || period_elapsed
+        } else {
+            period_elapsed
+        };
+        if due {
+            self.last_step_at = now;
+            if let Some(t) = measured_at {
+                self.last_acted_stamp = t;
+            }
+            self.fresh = false;
+        }
+        due
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sim_time_acts_once_per_new_joint_state() {
+        let mut s = Schedule::new(30.0);
+        s.use_sim_time(true);
+        s.joint_state(0.0);
+        assert!(s.due(0.0, Some(0.0)));
+        // The same stamp again, clock unchanged: wait.
+        s.joint_state(0.0);
+        assert!(!s.due(0.0, Some(0.0)));
+        // The next step's joint state: act at once.
+        s.joint_state(1.0 / 30.0);
+        assert!(s.due(1.0 / 30.0, Some(1.0 / 30.0)));
+        // No joint states, but the clock runs on: act once per period (to hold).
+        assert!(!s.due(0.05, Some(1.0 / 30.0)));
+        assert!(s.due(2.0 / 30.0, Some(1.0 / 30.0)));
+    }
+
+    #[test]
+    fn wall_time_acts_at_the_control_rate() {
+        let mut s = Schedule::new(10.0);
+        assert!(s.due(5.0, None));
+        s.joint_state(5.01);
+        assert!(!s.due(5.05, Some(5.01)));
+        assert!(s.due(5.1, Some(5.01)));
+    }
+
+    #[test]
+    fn switching_to_sim_time_forgets_wall_times() {
+        // Wall time ran for 3.5 s before the first /clock (sim time 0): the node must act on
+        // the next joint state, not wait for sim time to pass 3.5 s.
+        let mut s = Schedule::new(30.0);
+        s.joint_state(3.5);
+        assert!(s.due(3.5, Some(3.5)));
+        assert!(s.use_sim_time(true));
+        assert!(!s.use_sim_time(true));
+        s.joint_state(0.0);
+        assert!(s.due(0.0, Some(0.0)));
+    }
+}
