@@ -1,11 +1,12 @@
 //! The arm skill's contract with the module it drives, derived once from the robot model and
-//! the control rate: joint order, joint ranges and the action scale. Training, evaluation and
+//! the control rate: joint order and the action scale. (Joint ranges stay with the module's
+//! actuators, which clamp increments everywhere through `kumi_sim::apply_increments`.) Training, evaluation and
 //! the arm-module node all build one from the same model, and an exported policy carries it in
 //! its metadata, so a policy trained for other joints, limits or rates is refused, not run.
 
 use std::collections::BTreeMap;
 
-use kumi_model::{ActuatorMode, ModuleInstance};
+use kumi_model::ModuleInstance;
 
 use crate::metadata;
 use crate::observation::{JOINTS, OBSERVATION_DIM, OBSERVATION_NAMES};
@@ -17,9 +18,6 @@ pub struct ArmSkill {
     pub module: String,
     /// Joint names in policy order, without the module prefix (`joint1` .. `joint7`).
     pub joints: Vec<String>,
-    /// Lower and upper joint limits [rad].
-    pub lower: [f64; JOINTS],
-    pub upper: [f64; JOINTS],
     /// Largest increment per control step [rad] for each joint: the velocity limit [rad/s]
     /// divided by the control rate, so a saturated action asks for what the joint can do in
     /// one step.
@@ -70,11 +68,7 @@ impl ArmSkill {
             return Err(SkillError::ControlRate(control_hz));
         }
         let positions: Vec<_> = module.position_joints().collect();
-        let velocities = module
-            .actuators
-            .iter()
-            .filter(|a| a.mode == ActuatorMode::Velocity)
-            .count();
+        let velocities = module.velocity_joints().count();
         if positions.len() != JOINTS || velocities != 0 || module.ee_link.is_none() {
             return Err(SkillError::NotAnArm {
                 module: module.name.clone(),
@@ -88,23 +82,15 @@ impl ArmSkill {
             });
         }
         let prefix = format!("{}/", module.name);
-        let mut skill = Self {
+        Ok(Self {
             module: module.name.clone(),
             joints: positions
                 .iter()
                 .map(|a| a.joint.trim_start_matches(prefix.as_str()).to_string())
                 .collect(),
-            lower: [0.0; JOINTS],
-            upper: [0.0; JOINTS],
-            increment_scale: [0.0; JOINTS],
+            increment_scale: std::array::from_fn(|i| positions[i].velocity_limit / control_hz),
             control_hz,
-        };
-        for (i, a) in positions.iter().enumerate() {
-            skill.lower[i] = a.lower;
-            skill.upper[i] = a.upper;
-            skill.increment_scale[i] = a.velocity_limit / control_hz;
-        }
-        Ok(skill)
+        })
     }
 
     /// The joint increments [rad] for a policy output: each value clipped to [-1, 1] and scaled
@@ -157,8 +143,9 @@ impl ArmSkill {
     pub fn check(&self, found: &BTreeMap<String, String>) -> Result<(), MetadataMismatch> {
         // Keys are checked in a fixed order so that the first error names the root cause
         // (a foreign file fails on its format, not on some later key).
+        let contract = self.contract();
         for key in metadata::CONTRACT_KEYS {
-            let expected = &self.contract()[key];
+            let expected = &contract[key];
             match found.get(key) {
                 None => return Err(MetadataMismatch::Missing { key }),
                 Some(v) if v != expected => {
@@ -179,7 +166,7 @@ impl ArmSkill {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use kumi_model::{Actuator, Role};
+    use kumi_model::{Actuator, ActuatorMode, Role};
 
     fn arm(velocity_limit: f64) -> ModuleInstance {
         let actuators = (1..=JOINTS)

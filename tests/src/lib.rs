@@ -13,12 +13,21 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use kumi_model::{assemble, load_morphology, ModuleLibrary};
+use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
 use kumi_sim_bridge::{BridgeConfig, BridgeError, Mode};
 
 /// The workspace root.
 pub fn workspace() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// A shipped morphology (`arm`, `minimal`, `dragon`, `tricycle`), assembled.
+pub fn shipped_model(morphology: &str) -> Arc<RobotModel> {
+    let library = ModuleLibrary::shipped();
+    Arc::new(assemble(
+        &load_morphology(morphology, &library).unwrap(),
+        &library,
+    ))
 }
 
 /// The Python interpreter that has rclpy.
@@ -60,11 +69,7 @@ impl Bridge {
     }
 
     pub fn start_named(morphology: &str, robot: &str, domain: u16, mode: Mode) -> Self {
-        let library = ModuleLibrary::shipped();
-        let model = Arc::new(assemble(
-            &load_morphology(morphology, &library).unwrap(),
-            &library,
-        ));
+        let model = shipped_model(morphology);
         let config = BridgeConfig {
             model,
             robot: robot.to_string(),
@@ -202,11 +207,7 @@ impl ArmNode {
         domain: u16,
         output: kumi_arm_node::Output,
     ) -> Self {
-        let library = ModuleLibrary::shipped();
-        let model = Arc::new(assemble(
-            &load_morphology(morphology, &library).unwrap(),
-            &library,
-        ));
+        let model = shipped_model(morphology);
         let config = kumi_arm_node::ArmNodeConfig {
             model,
             robot: robot.to_string(),

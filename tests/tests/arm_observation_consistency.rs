@@ -3,11 +3,8 @@
 //! goal publisher send, must equal the training environment's, bit for bit, for the same
 //! simulator state; and the node's tool pose must match the simulator's.
 
-use std::sync::Arc;
-
 use kumi_arm_node::run::Prepared;
 use kumi_arm_node::{joints, ArmNodeConfig, ClockSource, Output};
-use kumi_model::{assemble, load_morphology, ModuleLibrary};
 use kumi_msgs::builtin_interfaces::Time;
 use kumi_msgs::geometry_msgs::PoseStamped;
 use kumi_msgs::std_msgs::Header;
@@ -19,11 +16,7 @@ use rand_chacha::ChaCha8Rng;
 
 #[test]
 fn the_node_sees_what_training_saw() {
-    let library = ModuleLibrary::shipped();
-    let model = Arc::new(assemble(
-        &load_morphology("arm", &library).unwrap(),
-        &library,
-    ));
+    let model = kumi_tests::shipped_model("arm");
     let config = ArmNodeConfig {
         model: model.clone(),
         robot: "arm".into(),

@@ -5,7 +5,6 @@ use std::collections::BTreeMap;
 use std::sync::Once;
 
 use candle_core::{Device, Tensor};
-use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
 use kumi_policies::metadata;
 use kumi_policies::observation::OBSERVATION_DIM;
 use kumi_policies::skill::ArmSkill;
@@ -16,13 +15,8 @@ use kumi_train::ppo::normalizer::RunningNorm;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-fn model(name: &str) -> RobotModel {
-    let library = ModuleLibrary::shipped();
-    assemble(&load_morphology(name, &library).unwrap(), &library)
-}
-
 fn arm_skill(control_hz: f64) -> ArmSkill {
-    ArmSkill::new(&model("arm").modules[0], control_hz).unwrap()
+    ArmSkill::new(&kumi_tests::shipped_model("arm").modules[0], control_hz).unwrap()
 }
 
 /// A random policy with `obs_dim` inputs, its statistics and its ONNX bytes.
@@ -177,7 +171,7 @@ fn the_shipped_policy_drives_every_arm_module_of_every_morphology() {
     let shipped = kumi_runtime::shipped_arm_policy();
     let mut driven = Vec::new();
     for name in ["arm", "minimal", "dragon", "tricycle"] {
-        let robot = model(name);
+        let robot = kumi_tests::shipped_model(name);
         let control_hz = kumi_sim::SimConfig::for_model(&robot).control_hz;
         for module in robot.modules.iter().filter(|m| m.kind == "arm") {
             let skill = ArmSkill::new(module, control_hz).unwrap();

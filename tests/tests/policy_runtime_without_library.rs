@@ -1,15 +1,13 @@
 //! Without `ORT_DYLIB_PATH`, asking for ONNX Runtime is a clear error and `auto` falls back to
 //! tract. (Its own process: ONNX Runtime is loaded at most once per process.)
 
-use kumi_model::{assemble, load_morphology, ModuleLibrary};
 use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{Backend, BackendChoice, SkillPolicy};
 
 #[test]
 fn onnxruntime_without_its_library_is_a_clear_error() {
     std::env::remove_var("ORT_DYLIB_PATH");
-    let library = ModuleLibrary::shipped();
-    let model = assemble(&load_morphology("arm", &library).unwrap(), &library);
+    let model = kumi_tests::shipped_model("arm");
     let skill = ArmSkill::new(&model.modules[0], 30.0).unwrap();
     let shipped = kumi_runtime::shipped_arm_policy();
 

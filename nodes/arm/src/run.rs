@@ -248,11 +248,6 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
             info!("{module}: using sim time from /clock");
         }
         let wall_now = start.elapsed().as_secs_f64();
-        let now = if sim {
-            sim_now.unwrap_or(0.0)
-        } else {
-            wall_now
-        };
 
         loop {
             match io.goal.take() {
@@ -310,7 +305,12 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                 }
             }
         }
-        let now = if sim { sim_now.unwrap_or(now) } else { now };
+        // After the joint states: in sim time, their stamps may have moved the clock on.
+        let now = if sim {
+            sim_now.unwrap_or(0.0)
+        } else {
+            wall_now
+        };
 
         let measured_at = prepared.controller.joints().map(|(_, t)| *t);
         if schedule.due(now, measured_at) {
