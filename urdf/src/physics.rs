@@ -46,12 +46,16 @@ impl Layout {
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PhysicsSettings {
     pub layout: Option<Layout>,
+    /// Physics steps per control step in MuJoCo, where a robot needs a finer step there than
+    /// the default (rapier keeps its own).
+    pub mujoco_substeps: Option<u32>,
 }
 
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawPhysics {
     layout: Option<String>,
+    mujoco_substeps: Option<u32>,
 }
 
 impl RawPhysics {
@@ -70,6 +74,16 @@ impl RawPhysics {
                 )
             })?),
         };
-        Ok(PhysicsSettings { layout })
+        if self.mujoco_substeps == Some(0) {
+            return Err(ModelError::new(
+                file,
+                "physics.mujoco_substeps",
+                Problem::BadValue("must be at least 1".into()),
+            ));
+        }
+        Ok(PhysicsSettings {
+            layout,
+            mujoco_substeps: self.mujoco_substeps,
+        })
     }
 }

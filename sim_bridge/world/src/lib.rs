@@ -1,20 +1,14 @@
 //! kumi's rapier world: any assembled morphology on flat ground, driven at the control rate.
 //!
-//! One [`World`] is one robot. Arm joints are position servos (PD with effort limit and a
+//! One [`World`] is one robot, behind the engine-independent [`SimWorld`] interface of
+//! `kumi-engine` (re-exported here). Arm joints are position servos (PD with effort limit and a
 //! rate-limited set-point), wheels are velocity servos; see [`kumi_model::Actuator`] for where
-//! every gain and limit comes from. Training, evaluation and the sim bridge all use this crate.
+//! every gain and limit comes from. rapier is the default engine of training, evaluation and
+//! the sim bridge.
 
-mod actuator;
-mod config;
 mod convert;
-mod error;
 mod spawn;
 mod world;
 
-pub use actuator::{
-    apply_increments, clamp_command, integrate_velocity_setpoint, slew, ServoState,
-};
-pub use config::SimConfig;
-pub use error::SimError;
-pub use kumi_model::Layout;
-pub use world::{Contact, RobotState, Snapshot, World, GROUND};
+pub use kumi_engine::*;
+pub use world::World;

@@ -9,10 +9,9 @@ use nalgebra::Isometry3;
 use rapier3d::prelude::*;
 use rapier3d_urdf::{UrdfLoaderOptions, UrdfRobot};
 
-use crate::config::SimConfig;
+use kumi_engine::{mount_is_impulse, SimConfig, SimError};
+
 use crate::convert::{to_na_isometry, to_rapier_pose};
-use crate::error::SimError;
-use kumi_model::Layout;
 
 /// Where a URDF link lives in rapier: a rigid body, and the link frame in that body's frame
 /// (not the identity for frame-only links such as `ee`, which the loader folds into a parent).
@@ -60,24 +59,6 @@ pub(crate) fn spawn(
     };
     let robot = UrdfRobot::from_robot(&model.urdf, options, Path::new(""));
 
-    // Which module each link belongs to, and which modules start their own multibody.
-    let module_of_link: HashMap<&str, usize> = model
-        .modules
-        .iter()
-        .enumerate()
-        .flat_map(|(i, m)| m.links.iter().map(move |l| (l.as_str(), i)))
-        .collect();
-    let has_children: Vec<bool> = model
-        .modules
-        .iter()
-        .map(|m| {
-            model
-                .modules
-                .iter()
-                .any(|c| c.parent.as_deref() == Some(m.name.as_str()))
-        })
-        .collect();
-
     let mut links: Vec<Option<LinkBody>> = vec![None; tree.links().len()];
     let mut loader_bodies = Vec::with_capacity(robot.links.len());
     let mut collider_links = HashMap::new();
@@ -113,16 +94,11 @@ pub(crate) fn spawn(
     for joint in robot.joints {
         let name = &model.urdf.joints[joint.urdf_joint_index].name;
         let (b1, b2) = (loader_bodies[joint.link1], loader_bodies[joint.link2]);
-        let is_mount = name.ends_with("/mount");
-        let impulse = is_mount
-            && match config.layout {
-                Layout::SingleMultibody => false,
-                Layout::PerModule => true,
-                Layout::PerLimb => {
-                    let child = &model.urdf.joints[joint.urdf_joint_index].child.link;
-                    has_children[module_of_link[child.as_str()]]
-                }
-            };
+        let impulse = mount_is_impulse(
+            model,
+            config.layout,
+            &model.urdf.joints[joint.urdf_joint_index],
+        );
         if impulse {
             let mut data = joint.joint;
             data.set_contacts_enabled(false);

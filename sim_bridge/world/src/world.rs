@@ -2,42 +2,21 @@
 
 use std::sync::Arc;
 
+use kumi_engine::{
+    Contact, Engine, RobotState, ServoBank, ServoState, SimConfig, SimError, SimWorld, Snapshot,
+    GROUND,
+};
 use kumi_model::kinematics::KinematicTree;
-use kumi_model::{Actuator, ActuatorMode, RobotModel};
+use kumi_model::RobotModel;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rapier3d::prelude::*;
 
-use crate::actuator::{clamp_command, integrate_velocity_setpoint, max_lead, slew, ServoState};
-use crate::config::SimConfig;
 use crate::convert::{to_na_isometry, to_na_vector, to_rapier_pose};
-use crate::error::SimError;
 use crate::spawn::{link_pose, place_body, spawn, ArticulatedJoint, LinkBody};
 
-/// A joint configuration and base pose to place the robot at.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RobotState {
-    /// Base link pose in the world [m, unit quaternion]. Ignored for fixed-base robots, whose
-    /// base stays at the world origin.
-    pub base_pose_w: Isometry3<f64>,
-    /// One position per actuator [rad], in [`World::actuator_names`] order (wheel angles too).
-    pub joint_positions: Vec<f64>,
-}
-
-/// A contact between two parts of the scene.
-#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
-pub struct Contact {
-    /// URDF link name, or `ground`.
-    pub a: String,
-    /// URDF link name, or `ground`.
-    pub b: String,
-}
-
-/// The name contacts use for the ground.
-pub const GROUND: &str = "ground";
-
-/// Everything needed to restore the physics exactly as it was.
+/// Everything needed to restore rapier's physics exactly as it was.
 #[derive(Clone)]
-pub struct Snapshot {
+struct RapierState {
     islands: IslandManager,
     broad_phase: BroadPhaseBvh,
     narrow_phase: NarrowPhase,
@@ -50,7 +29,7 @@ pub struct Snapshot {
     time_s: f64,
 }
 
-impl Snapshot {
+impl RapierState {
     fn capture(physics: &PhysicsWorld, servos: &[ServoState], time_s: f64) -> Self {
         Self {
             islands: physics.islands.clone(),
@@ -75,18 +54,14 @@ pub struct World {
     physics: PhysicsWorld,
     links: Vec<LinkBody>,
     joints: Vec<ArticulatedJoint>,
-    /// Every actuator, in the order of the per-joint vectors of this API.
-    actuators: Vec<Actuator>,
-    servos: Vec<ServoState>,
-    /// First actuator index of each module, and one past the last.
-    module_actuators: Vec<std::ops::Range<usize>>,
+    servos: ServoBank,
     multibody_roots: Vec<RigidBodyHandle>,
     collider_links: std::collections::HashMap<ColliderHandle, usize>,
     ground: ColliderHandle,
     base_link: usize,
     /// The physics as built, before the robot was placed: every reset starts from it, so a
     /// reset world and a freshly built one follow bit-identical trajectories.
-    pristine: Snapshot,
+    pristine: RapierState,
     time_s: f64,
 }
 
@@ -112,23 +87,12 @@ impl World {
             .num_internal_stabilization_iterations = config.stabilization_iterations as usize;
         let spawned = spawn(&model, &tree, &config, &mut physics)?;
 
-        let actuators: Vec<_> = model.actuators().cloned().collect();
-        let mut module_actuators = Vec::with_capacity(model.modules.len());
-        let mut start = 0;
-        for m in &model.modules {
-            module_actuators.push(start..start + m.actuators.len());
-            start += m.actuators.len();
-        }
         let base_link = tree
             .link_index(&model.base_link)
             .expect("the base link is in the URDF");
-        let servos: Vec<ServoState> = actuators
-            .iter()
-            .map(|a| ServoState::holding(a.mode, 0.0))
-            .collect();
-        let pristine = Snapshot::capture(&physics, &servos, 0.0);
+        let servos = ServoBank::new(&model);
+        let pristine = RapierState::capture(&physics, servos.states(), 0.0);
         let mut world = Self {
-            actuators,
             model,
             config,
             tree,
@@ -136,7 +100,6 @@ impl World {
             links: spawned.links,
             joints: spawned.joints,
             servos,
-            module_actuators,
             multibody_roots: spawned.multibody_roots,
             collider_links: spawned.collider_links,
             ground: spawned.ground,
@@ -147,76 +110,6 @@ impl World {
         let home = world.home_state();
         world.reset(&home);
         Ok(world)
-    }
-
-    pub fn model(&self) -> &Arc<RobotModel> {
-        &self.model
-    }
-
-    pub fn config(&self) -> &SimConfig {
-        &self.config
-    }
-
-    /// Simulated time since the last reset [s].
-    pub fn time(&self) -> f64 {
-        self.time_s
-    }
-
-    /// Actuated joint names, in the order of every per-joint vector of this API.
-    pub fn actuator_names(&self) -> Vec<&str> {
-        self.model.actuators().map(|a| a.joint.as_str()).collect()
-    }
-
-    /// The actuator index range of a module.
-    pub fn module_range(&self, module: &str) -> Result<std::ops::Range<usize>, SimError> {
-        let i = self
-            .model
-            .modules
-            .iter()
-            .position(|m| m.name == module)
-            .ok_or_else(|| SimError::UnknownModule(module.to_string()))?;
-        Ok(self.module_actuators[i].clone())
-    }
-
-    /// The home configuration, standing on the ground at the world origin.
-    pub fn home_state(&self) -> RobotState {
-        let joint_positions: Vec<f64> = self
-            .model
-            .modules
-            .iter()
-            .flat_map(|m| {
-                let mut home = m.home.iter().copied();
-                m.actuators
-                    .iter()
-                    .map(move |a| match a.mode {
-                        ActuatorMode::Position => home.next().unwrap_or(0.0),
-                        ActuatorMode::Velocity => 0.0,
-                    })
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        self.standing_state(0.0, 0.0, 0.0, joint_positions)
-    }
-
-    /// A configuration with the base at (`x`, `y`) [m] and heading `yaw` [rad], lifted so that
-    /// the lowest collider just touches the ground.
-    pub fn standing_state(
-        &self,
-        x: f64,
-        y: f64,
-        yaw: f64,
-        joint_positions: Vec<f64>,
-    ) -> RobotState {
-        let level = Isometry3::from_parts(
-            Translation3::new(x, y, 0.0),
-            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
-        );
-        let lowest = self.lowest_point(&level, &joint_positions);
-        let lift = if self.model.fixed_base { 0.0 } else { -lowest };
-        RobotState {
-            base_pose_w: Translation3::new(0.0, 0.0, lift) * level,
-            joint_positions,
-        }
     }
 
     /// The lowest point [m] of any robot collider with the robot placed at `base_pose_w`.
@@ -249,10 +142,60 @@ impl World {
         q
     }
 
-    /// Places the robot at `state`, at rest, with every servo holding that configuration and
-    /// every wheel commanded to stop; clears contacts and time. Runs in place, without
-    /// rebuilding: it restores the physics as built, then places the bodies.
-    pub fn reset(&mut self, state: &RobotState) {
+    fn restore_owned(&mut self, s: RapierState) {
+        self.physics.islands = s.islands;
+        self.physics.broad_phase = s.broad_phase;
+        self.physics.narrow_phase = s.narrow_phase;
+        self.physics.bodies = s.bodies;
+        self.physics.colliders = s.colliders;
+        self.physics.impulse_joints = s.impulse_joints;
+        self.physics.multibody_joints = s.multibody_joints;
+        self.physics.ccd_solver = s.ccd_solver;
+        self.servos.restore(&s.servos);
+        self.time_s = s.time_s;
+    }
+}
+
+impl SimWorld for World {
+    fn engine(&self) -> Engine {
+        Engine::Rapier
+    }
+
+    fn model(&self) -> &Arc<RobotModel> {
+        &self.model
+    }
+
+    fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    fn servos(&self) -> &ServoBank {
+        &self.servos
+    }
+
+    fn servos_mut(&mut self) -> &mut ServoBank {
+        &mut self.servos
+    }
+
+    fn time(&self) -> f64 {
+        self.time_s
+    }
+
+    fn standing_state(&self, x: f64, y: f64, yaw: f64, joint_positions: Vec<f64>) -> RobotState {
+        let level = Isometry3::from_parts(
+            Translation3::new(x, y, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
+        );
+        let lowest = self.lowest_point(&level, &joint_positions);
+        let lift = if self.model.fixed_base { 0.0 } else { -lowest };
+        RobotState {
+            base_pose_w: Translation3::new(0.0, 0.0, lift) * level,
+            joint_positions,
+        }
+    }
+
+    /// Runs in place, without rebuilding: restores the physics as built, then places the bodies.
+    fn reset(&mut self, state: &RobotState) {
         assert_eq!(
             state.joint_positions.len(),
             self.joints.len(),
@@ -298,141 +241,49 @@ impl World {
             mb.generalized_velocity_mut().fill(0.0);
         }
         // Arms hold the configuration; wheels start braked, holding their angle.
-        for (i, servo) in self.servos.iter_mut().enumerate() {
-            *servo = ServoState::holding(self.actuators[i].mode, state.joint_positions[i]);
-        }
+        self.servos.hold(&state.joint_positions);
         self.time_s = 0.0;
     }
 
-    /// A copy of the full physics state.
-    pub fn snapshot(&self) -> Snapshot {
-        Snapshot::capture(&self.physics, &self.servos, self.time_s)
+    fn snapshot(&self) -> Snapshot {
+        Snapshot::new(RapierState::capture(
+            &self.physics,
+            self.servos.states(),
+            self.time_s,
+        ))
     }
 
-    /// Restores a snapshot taken from this world: the trajectory from here on is bit-identical
-    /// to the one that followed the snapshot.
-    pub fn restore(&mut self, snapshot: &Snapshot) {
-        self.restore_owned(snapshot.clone());
-    }
-
-    fn restore_owned(&mut self, s: Snapshot) {
-        self.physics.islands = s.islands;
-        self.physics.broad_phase = s.broad_phase;
-        self.physics.narrow_phase = s.narrow_phase;
-        self.physics.bodies = s.bodies;
-        self.physics.colliders = s.colliders;
-        self.physics.impulse_joints = s.impulse_joints;
-        self.physics.multibody_joints = s.multibody_joints;
-        self.physics.ccd_solver = s.ccd_solver;
-        self.servos = s.servos;
-        self.time_s = s.time_s;
-    }
-
-    /// Commands position targets [rad] for a module's position joints (an arm's 7 joints, in
-    /// order). Targets are clamped to the joint ranges; the servo set-point slews toward them
-    /// at the joint velocity limit. A non-finite value rejects the whole command.
-    pub fn set_position_targets(&mut self, module: &str, targets: &[f64]) -> Result<(), SimError> {
-        self.set_module_commands(module, ActuatorMode::Position, targets)
-    }
-
-    /// Commands one wheel velocity [rad/s] for both wheels of a wheel module, clamped to the
-    /// velocity limit.
-    pub fn set_wheel_velocity(&mut self, module: &str, velocity: f64) -> Result<(), SimError> {
-        let range = self.module_range(module)?;
-        let n = self.actuators[range]
-            .iter()
-            .filter(|a| a.mode == ActuatorMode::Velocity)
-            .count();
-        self.set_module_commands(module, ActuatorMode::Velocity, &vec![velocity; n])
-    }
-
-    fn set_module_commands(
-        &mut self,
-        module: &str,
-        mode: ActuatorMode,
-        values: &[f64],
-    ) -> Result<(), SimError> {
-        let range = self.module_range(module)?;
-        let indices: Vec<usize> = range.filter(|&i| self.actuators[i].mode == mode).collect();
-        if indices.is_empty() {
-            return Err(SimError::WrongModuleKind {
-                module: module.to_string(),
-                what: match mode {
-                    ActuatorMode::Position => "position",
-                    ActuatorMode::Velocity => "velocity",
-                },
-            });
+    fn restore(&mut self, snapshot: &Snapshot) -> Result<(), SimError> {
+        let state = snapshot.downcast::<RapierState>()?.clone();
+        if state.servos.len() != self.servos.states().len() {
+            return Err(SimError::ForeignSnapshot);
         }
-        if indices.len() != values.len() {
-            return Err(SimError::LengthMismatch {
-                module: module.to_string(),
-                expected: indices.len(),
-                got: values.len(),
-            });
-        }
-        let mut clamped = Vec::with_capacity(values.len());
-        for (&i, &v) in indices.iter().zip(values) {
-            clamped.push(clamp_command(&self.actuators[i], v).ok_or_else(|| {
-                SimError::NonFinite {
-                    module: module.to_string(),
-                    value: v,
-                }
-            })?);
-        }
-        for (&i, v) in indices.iter().zip(clamped) {
-            self.servos[i].command = v;
-        }
+        self.restore_owned(state);
         Ok(())
     }
 
-    /// The current commands, in actuator order: position targets [rad] or velocities [rad/s].
-    pub fn commands(&self) -> Vec<f64> {
-        self.servos.iter().map(|s| s.command).collect()
-    }
-
     /// Advances one control step (`substeps` physics steps).
-    pub fn step(&mut self) {
+    fn step(&mut self) {
         let dt = self.config.dt();
         for _ in 0..self.config.substeps {
             for (i, joint) in self.joints.iter().enumerate() {
-                let servo = &mut self.servos[i];
-                let actuator = &self.actuators[i];
-                let (stiffness, damping) = (actuator.stiffness as f32, actuator.damping as f32);
                 let (mb, link_id) = self
                     .physics
                     .multibody_joints
                     .get_mut_internal(joint.handle)
                     .expect("actuated joints are multibody joints");
                 let joint = &mut mb.link_mut(link_id).expect("link exists").joint;
-                match actuator.mode {
-                    ActuatorMode::Position => {
-                        servo.setpoint =
-                            slew(servo.setpoint, servo.command, actuator.velocity_limit, dt);
-                        joint.data.set_motor_position(
-                            JointAxis::AngX,
-                            servo.setpoint as f32,
-                            stiffness,
-                            damping,
-                        );
-                    }
-                    ActuatorMode::Velocity => {
-                        let q = f64::from(joint.coords()[3]);
-                        servo.setpoint = integrate_velocity_setpoint(
-                            servo.setpoint,
-                            servo.command,
-                            q,
-                            max_lead(actuator),
-                            dt,
-                        );
-                        joint.data.set_motor(
-                            JointAxis::AngX,
-                            servo.setpoint as f32,
-                            servo.command as f32,
-                            stiffness,
-                            damping,
-                        );
-                    }
-                }
+                let target = self.servos.advance(i, f64::from(joint.coords()[3]), dt);
+                let a = &self.servos.actuators()[i];
+                // rapier's force-based motor: implicit PD toward (set-point, velocity target),
+                // clamped to the effort limit (set at spawn).
+                joint.data.set_motor(
+                    JointAxis::AngX,
+                    target.position as f32,
+                    target.velocity as f32,
+                    a.stiffness as f32,
+                    a.damping as f32,
+                );
             }
             self.physics.step();
         }
@@ -440,7 +291,7 @@ impl World {
     }
 
     /// Joint positions [rad], in actuator order.
-    pub fn joint_positions(&self) -> Vec<f64> {
+    fn joint_positions(&self) -> Vec<f64> {
         self.joints
             .iter()
             .map(|j| {
@@ -451,7 +302,7 @@ impl World {
     }
 
     /// Joint velocities [rad/s], in actuator order.
-    pub fn joint_velocities(&self) -> Vec<f64> {
+    fn joint_velocities(&self) -> Vec<f64> {
         self.joints
             .iter()
             .map(|j| {
@@ -461,14 +312,8 @@ impl World {
             .collect()
     }
 
-    /// Tilt of the base [rad]: the angle between its z axis and the world's.
-    pub fn base_tilt(&self) -> f64 {
-        let z = self.base_pose().rotation * Vector3::z();
-        z.z.clamp(-1.0, 1.0).acos()
-    }
-
     /// The world pose of any URDF link (the `ee` tool frames included).
-    pub fn link_pose(&self, link: &str) -> Result<Isometry3<f64>, SimError> {
+    fn link_pose(&self, link: &str) -> Result<Isometry3<f64>, SimError> {
         let index = self
             .tree
             .link_index(link)
@@ -477,19 +322,19 @@ impl World {
     }
 
     /// The base link's pose in the world.
-    pub fn base_pose(&self) -> Isometry3<f64> {
+    fn base_pose(&self) -> Isometry3<f64> {
         link_pose(&self.physics, &self.links[self.base_link])
     }
 
     /// The base's linear [m/s] and angular [rad/s] velocity, both in the world frame
     /// (linear velocity of the base body's centre of mass).
-    pub fn base_twist_w(&self) -> (Vector3<f64>, Vector3<f64>) {
+    fn base_twist_w(&self) -> (Vector3<f64>, Vector3<f64>) {
         let rb = &self.physics.bodies[self.links[self.base_link].body];
         (to_na_vector(rb.linvel()), to_na_vector(rb.angvel()))
     }
 
     /// Every pair of touching colliders, by link name (or [`GROUND`]), sorted and deduplicated.
-    pub fn contacts(&self) -> Vec<Contact> {
+    fn contacts(&self) -> Vec<Contact> {
         let name = |c: ColliderHandle| -> String {
             if c == self.ground {
                 GROUND.to_string()
@@ -505,33 +350,15 @@ impl World {
             .narrow_phase
             .contact_pairs()
             .filter(|p| p.has_any_active_contact())
-            .map(|p| {
-                let (a, b) = (name(p.collider1), name(p.collider2));
-                if a <= b {
-                    Contact { a, b }
-                } else {
-                    Contact { a: b, b: a }
-                }
-            })
+            .map(|p| Contact::new(name(p.collider1), name(p.collider2)))
             .collect();
         contacts.sort();
         contacts.dedup();
         contacts
     }
 
-    /// Links that touch the ground now.
-    pub fn ground_contacts(&self) -> Vec<String> {
-        self.contacts()
-            .into_iter()
-            .filter_map(|c| match (c.a.as_str(), c.b.as_str()) {
-                (GROUND, other) | (other, GROUND) => Some(other.to_string()),
-                _ => None,
-            })
-            .collect()
-    }
-
     /// The lowest point [m] of any robot collider now (negative: sunk into the ground).
-    pub fn lowest_collider_z(&self) -> f64 {
+    fn lowest_collider_z(&self) -> f64 {
         self.collider_links
             .keys()
             .map(|&h| {
@@ -544,7 +371,7 @@ impl World {
     /// For each mounted module, how far its root link has moved from where its mount puts it:
     /// `(module, translation error [m], rotation error [rad])`. Exactly zero for mounts inside
     /// a multibody; impulse-joint mounts flex a little.
-    pub fn mount_errors(&self) -> Vec<(String, f64, f64)> {
+    fn mount_errors(&self) -> Vec<(String, f64, f64)> {
         self.model
             .modules
             .iter()
@@ -564,7 +391,7 @@ impl World {
     }
 
     /// The world pose of every rigid body's link frame, for rendering or debugging.
-    pub fn body_poses(&self) -> Vec<(String, Isometry3<f64>)> {
+    fn body_poses(&self) -> Vec<(String, Isometry3<f64>)> {
         self.tree
             .links()
             .iter()

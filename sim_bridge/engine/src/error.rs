@@ -1,4 +1,4 @@
-//! Errors of the simulator.
+//! Errors of the simulated worlds, whatever the engine.
 
 use kumi_model::kinematics::TreeError;
 
@@ -26,4 +26,24 @@ pub enum SimError {
     WrongModuleKind { module: String, what: &'static str },
     #[error("invalid configuration: {0}")]
     BadConfig(String),
+    #[error("robot `{robot}`, module `{module}`: the {engine} engine cannot express it: {reason}")]
+    Unsupported {
+        engine: crate::Engine,
+        robot: String,
+        module: String,
+        reason: String,
+    },
+    #[error("the {engine} engine is not available: {reason}")]
+    Unavailable {
+        engine: crate::Engine,
+        reason: String,
+    },
+    #[error("the {engine} engine rejected robot `{robot}`: {message}")]
+    EngineRejected {
+        engine: crate::Engine,
+        robot: String,
+        message: String,
+    },
+    #[error("this snapshot was taken from a world of another engine or robot")]
+    ForeignSnapshot,
 }

@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use kumi_model::{assemble, load_morphology, ActuatorMode, ModuleLibrary, RobotModel};
-use kumi_sim::{SimConfig, World};
+use kumi_worlds::{Engine, SimConfig, SimWorld};
 
 pub fn model(name: &str) -> Arc<RobotModel> {
     let library = ModuleLibrary::shipped();
@@ -14,9 +14,15 @@ pub fn model(name: &str) -> Arc<RobotModel> {
     ))
 }
 
-pub fn world(name: &str) -> World {
+/// Every engine this build has: rapier, and MuJoCo with the `mujoco` feature (CI builds it,
+/// and `engines_under_test` fails there if it is missing).
+pub fn engines() -> Vec<Engine> {
+    kumi_worlds::available_engines()
+}
+
+pub fn world(engine: Engine, name: &str) -> Box<dyn SimWorld> {
     let model = model(name);
-    World::new(model.clone(), SimConfig::for_model(&model)).unwrap()
+    kumi_worlds::build(engine, model.clone(), SimConfig::for_model(&model)).unwrap()
 }
 
 /// SplitMix64: a tiny seeded generator, so command sequences are reproducible.
@@ -43,7 +49,7 @@ impl Rng {
 
 /// Sends every arm a random target within its joint limits and every wheel module a random
 /// velocity within its limit.
-pub fn random_commands(world: &mut World, rng: &mut Rng) {
+pub fn random_commands(world: &mut dyn SimWorld, rng: &mut Rng) {
     let model = world.model().clone();
     for m in &model.modules {
         let positions: Vec<f64> = m
@@ -67,7 +73,7 @@ pub fn random_commands(world: &mut World, rng: &mut Rng) {
 }
 
 /// Every number that describes the world's state, as bits: for exact comparisons.
-pub fn state_bits(world: &World) -> Vec<u64> {
+pub fn state_bits(world: &dyn SimWorld) -> Vec<u64> {
     let mut bits: Vec<u64> = world
         .joint_positions()
         .into_iter()

@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{random_commands, world, Rng};
+use common::{engines, random_commands, world, Rng};
 
 /// Joint speed bound [rad/s]. Set-points slew at 1.5 rad/s and wheels turn at up to 5 rad/s,
 /// but fully random targets tip the mobile robots over (and the fixed arm into the floor), and
@@ -15,30 +15,31 @@ const MAX_BASE_SPEED: f64 = 10.0;
 
 #[test]
 fn random_targets_for_60_s_stay_finite_and_bounded() {
-    for (seed, name) in ["arm", "minimal", "dragon", "tricycle"]
+    for (seed, (engine, name)) in engines()
         .into_iter()
+        .flat_map(|e| ["arm", "minimal", "dragon", "tricycle"].map(|n| (e, n)))
         .enumerate()
     {
-        let mut w = world(name);
+        let mut w = world(engine, name);
         let mut rng = Rng::new(seed as u64 + 1);
         let steps = (60.0 * w.config().control_hz) as usize;
         for k in 0..steps {
             // A new random command every second.
             if k % 30 == 0 {
-                random_commands(&mut w, &mut rng);
+                random_commands(w.as_mut(), &mut rng);
             }
             w.step();
             let v = w.joint_velocities();
             let worst = v.iter().fold(0.0_f64, |a, x| a.max(x.abs()));
             assert!(
                 worst.is_finite() && worst < MAX_JOINT_SPEED,
-                "{name}: joint speed {worst} rad/s at t = {:.2} s",
+                "{engine} {name}: joint speed {worst} rad/s at t = {:.2} s",
                 w.time()
             );
             let (lin, _) = w.base_twist_w();
             assert!(
                 lin.norm().is_finite() && lin.norm() < MAX_BASE_SPEED,
-                "{name}: base speed {} m/s at t = {:.2} s",
+                "{engine} {name}: base speed {} m/s at t = {:.2} s",
                 lin.norm(),
                 w.time()
             );

@@ -2,15 +2,16 @@
 
 mod common;
 
-use common::world;
+use common::{engines, world};
 use kumi_model::Role;
+use kumi_worlds::Engine;
 use nalgebra::Vector3;
 
 /// Wheel radius [m], from wheel.urdf (the tyre cylinder).
 const WHEEL_RADIUS: f64 = 0.27;
 
-fn drives_forward_at_omega_r(name: &str) {
-    let mut w = world(name);
+fn drives_forward_at_omega_r(engine: Engine, name: &str) {
+    let mut w = world(engine, name);
     let omega = 2.0; // [rad/s]
     let base_x = w.base_pose().rotation * Vector3::x();
     let model = w.model().clone();
@@ -33,23 +34,40 @@ fn drives_forward_at_omega_r(name: &str) {
     let ratio = travelled / expected;
     assert!(
         (ratio - 1.0).abs() < 0.1,
-        "{name}: travelled {travelled:.3} m in 5 s, expected {expected:.3} m (ratio {ratio:.3})"
+        "{engine} {name}: travelled {travelled:.3} m in 5 s, expected {expected:.3} m (ratio {ratio:.3})"
     );
 }
 
 #[test]
+fn minimal_drives_forward_at_omega_r() {
+    for engine in engines() {
+        drives_forward_at_omega_r(engine, "minimal");
+    }
+}
+
+#[test]
 fn dragon_drives_forward_at_omega_r() {
-    drives_forward_at_omega_r("dragon");
+    for engine in engines() {
+        drives_forward_at_omega_r(engine, "dragon");
+    }
 }
 
 #[test]
 fn tricycle_drives_forward_at_omega_r() {
-    drives_forward_at_omega_r("tricycle");
+    for engine in engines() {
+        drives_forward_at_omega_r(engine, "tricycle");
+    }
 }
 
 #[test]
 fn wheel_velocity_is_clamped_and_nan_rejected() {
-    let mut w = world("dragon");
+    for engine in engines() {
+        wheel_commands_are_checked(engine);
+    }
+}
+
+fn wheel_commands_are_checked(engine: Engine) {
+    let mut w = world(engine, "dragon");
     w.set_wheel_velocity("front_wheel", 100.0).unwrap();
     let range = w.module_range("front_wheel").unwrap();
     assert_eq!(
