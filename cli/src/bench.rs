@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use kumi_model::{ActuatorMode, RobotModel};
-use kumi_sim::{SimConfig, World};
+use kumi_worlds::{Engine, SimConfig, SimWorld};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -41,6 +41,10 @@ pub struct BenchSimArgs {
     /// Print one JSON array of records instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Engines to measure, interleaved model by model (e.g. `rapier,mujoco`; default: the
+    /// engine of --engine, or rapier).
+    #[arg(long, value_delimiter = ',', value_parser = crate::engine::parse)]
+    pub engines: Vec<Engine>,
     #[command(flatten)]
     pub physics: PhysicsArgs,
 }
@@ -48,6 +52,7 @@ pub struct BenchSimArgs {
 #[derive(Serialize)]
 struct Record {
     model: String,
+    engine: String,
     config: String,
     threads: usize,
     worlds: usize,
@@ -68,7 +73,7 @@ struct Stability {
 
 /// A deterministic, representative load: every arm joint tracks a slow sine around home
 /// (0.2 rad, 0.5 Hz), every wheel module turns at 1 rad/s.
-fn drive(world: &mut World, home: &[f64], step: u64) {
+fn drive(world: &mut dyn SimWorld, home: &[f64], step: u64) {
     let model = world.model().clone();
     let t = step as f64 / world.config().control_hz;
     let offset = 0.2 * (std::f64::consts::PI * t).sin();
@@ -89,12 +94,17 @@ fn drive(world: &mut World, home: &[f64], step: u64) {
     }
 }
 
-fn steps_per_second(model: &Arc<RobotModel>, config: SimConfig, steps: u64) -> Result<f64> {
-    let mut world = World::new(model.clone(), config)?;
+fn steps_per_second(
+    engine: Engine,
+    model: &Arc<RobotModel>,
+    config: SimConfig,
+    steps: u64,
+) -> Result<f64> {
+    let mut world = crate::engine::world(engine, model.clone(), config)?;
     let home = world.home_state().joint_positions;
     let start = Instant::now();
     for k in 0..steps {
-        drive(&mut world, &home, k);
+        drive(world.as_mut(), &home, k);
         world.step();
     }
     Ok(steps as f64 / start.elapsed().as_secs_f64())
@@ -105,8 +115,8 @@ fn median(mut xs: Vec<f64>) -> f64 {
     xs[xs.len() / 2]
 }
 
-fn stability(model: &Arc<RobotModel>, config: SimConfig) -> Result<Stability> {
-    let mut world = World::new(model.clone(), config)?;
+fn stability(engine: Engine, model: &Arc<RobotModel>, config: SimConfig) -> Result<Stability> {
+    let mut world = crate::engine::world(engine, model.clone(), config)?;
     let start = world.base_pose().translation.vector;
     let (mut tilt_max, mut mount_max, mut lowest) = (0.0_f64, 0.0_f64, f64::INFINITY);
     for _ in 0..(60.0 * config.control_hz) as u64 {
@@ -127,7 +137,12 @@ fn stability(model: &Arc<RobotModel>, config: SimConfig) -> Result<Stability> {
     })
 }
 
-fn bench_model(name: &str, args: &BenchSimArgs, worlds: usize) -> Result<Vec<Record>> {
+fn bench_model(
+    engine: Engine,
+    name: &str,
+    args: &BenchSimArgs,
+    worlds: usize,
+) -> Result<Vec<Record>> {
     let model = load_model(name)?;
     let config = args.physics.config(&model);
     let steps = (args.seconds * config.control_hz).round().max(1.0) as u64;
@@ -136,12 +151,12 @@ fn bench_model(name: &str, args: &BenchSimArgs, worlds: usize) -> Result<Vec<Rec
         (0..7)
             .map(|_| {
                 let t = Instant::now();
-                let w = World::new(model.clone(), config).map(|_| ());
+                let w = crate::engine::world(engine, model.clone(), config).map(|_| ());
                 w.map(|_| t.elapsed().as_secs_f64() * 1e3)
             })
             .collect::<Result<Vec<_>, _>>()?,
     );
-    let mut world = World::new(model.clone(), config)?;
+    let mut world = crate::engine::world(engine, model.clone(), config)?;
     let home = world.home_state();
     for _ in 0..30 {
         world.step();
@@ -155,7 +170,7 @@ fn bench_model(name: &str, args: &BenchSimArgs, worlds: usize) -> Result<Vec<Rec
             })
             .collect(),
     );
-    let single = steps_per_second(&model, config, steps)?;
+    let single = steps_per_second(engine, &model, config, steps)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(worlds)
         .build()?;
@@ -163,18 +178,19 @@ fn bench_model(name: &str, args: &BenchSimArgs, worlds: usize) -> Result<Vec<Rec
     pool.install(|| {
         (0..worlds)
             .into_par_iter()
-            .map(|_| steps_per_second(&model, config, steps).map(|_| ()))
+            .map(|_| steps_per_second(engine, &model, config, steps).map(|_| ()))
             .collect::<Result<Vec<_>>>()
     })?;
     let parallel = (steps * worlds as u64) as f64 / start.elapsed().as_secs_f64();
     let stability = if args.stability {
-        Some(stability(&model, config)?)
+        Some(stability(engine, &model, config)?)
     } else {
         None
     };
     let record = |threads, worlds, rate| Record {
         model: model.name.clone(),
-        config: config.label(),
+        engine: engine.to_string(),
+        config: config.label_for(engine),
         threads,
         worlds,
         control_steps_per_s: rate,
@@ -195,17 +211,27 @@ pub fn run(what: BenchCommand) -> Result<()> {
     } else {
         args.worlds
     };
+    let engines = if args.engines.is_empty() {
+        vec![args.physics.engine.unwrap_or(Engine::Rapier)]
+    } else {
+        args.engines.clone()
+    };
+    for &engine in &engines {
+        crate::engine::choose(Some(engine), Engine::Rapier)?;
+    }
     let mut records = Vec::new();
     for name in &args.models {
-        tracing::info!("benchmarking {name}");
-        records.extend(bench_model(name, &args, worlds)?);
+        for &engine in &engines {
+            tracing::info!("benchmarking {name} on {engine}");
+            records.extend(bench_model(engine, name, &args, worlds)?);
+        }
     }
     if args.json {
         println!("{}", serde_json::to_string(&records)?);
         return Ok(());
     }
-    println!("| model | config | threads | worlds | control steps/s | build [ms] | reset [us] | 60 s xy drift [m] | max tilt [deg] | max mount error [deg] |");
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("| model | engine | config | threads | worlds | control steps/s | build [ms] | reset [us] | 60 s xy drift [m] | max tilt [deg] | max mount error [deg] |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &records {
         let (drift, tilt, mount) = match r.stability {
             Some(s) => (
@@ -216,8 +242,9 @@ pub fn run(what: BenchCommand) -> Result<()> {
             None => ("-".into(), "-".into(), "-".into()),
         };
         println!(
-            "| {} | {} | {} | {} | {:.0} | {:.2} | {:.1} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {:.0} | {:.2} | {:.1} | {} | {} | {} |",
             r.model,
+            r.engine,
             r.config,
             r.threads,
             r.worlds,

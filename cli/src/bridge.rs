@@ -30,6 +30,9 @@ pub struct BridgeArgs {
     /// A module whose commands stop for this long [s of sim time] holds its position.
     #[arg(long, default_value_t = 0.5)]
     pub stale_after: f64,
+    /// Physics engine: rapier (default) or mujoco (with `--features mujoco`).
+    #[arg(long, value_parser = crate::engine::parse)]
+    pub engine: Option<kumi_worlds::Engine>,
 }
 
 pub fn run(args: BridgeArgs) -> Result<()> {
@@ -41,6 +44,7 @@ pub fn run(args: BridgeArgs) -> Result<()> {
         bail!("--stale-after must be a positive number of seconds");
     }
     let config = BridgeConfig {
+        engine: crate::engine::choose(args.engine, kumi_worlds::Engine::Rapier)?,
         robot: args.robot.unwrap_or_else(|| model.name.clone()),
         domain_id: kumi_ros::domain_id_from_env()?,
         model,

@@ -34,6 +34,9 @@ pub struct EvalArmArgs {
     /// onnxruntime or tract.
     #[arg(long, default_value = "auto")]
     pub backend: BackendChoice,
+    /// Physics engines to evaluate in, one report each (e.g. `rapier,mujoco`; default rapier).
+    #[arg(long, value_delimiter = ',', value_parser = crate::engine::parse)]
+    pub engine: Vec<kumi_worlds::Engine>,
     /// Print one JSON object instead of a markdown table.
     #[arg(long)]
     pub json: bool,
@@ -46,7 +49,7 @@ pub fn run(what: EvalCommand) -> Result<()> {
     let model = load_model("arm")?;
     let skill = ArmSkill::new(
         &model.modules[0],
-        kumi_sim::SimConfig::for_model(&model).control_hz,
+        kumi_worlds::SimConfig::for_model(&model).control_hz,
     )?;
     // Load once here so that a bad file fails before any work, with its own message.
     let probe = SkillPolicy::load(&path, &skill, args.backend)?;
@@ -73,32 +76,60 @@ pub fn run(what: EvalCommand) -> Result<()> {
         args.seed,
     );
     drop(probe);
-    eprintln!(
-        "evaluating {} ({backend} backend) over {} goals",
-        path.display(),
-        args.rollouts
-    );
-    let start = Instant::now();
-    let result = evaluate(
-        model,
-        ArmReachConfig::default(),
-        args.rollouts,
-        args.seed,
-        || {
-            let mut policy =
-                SkillPolicy::load(&path, &skill, args.backend).map_err(|e| e.to_string())?;
-            Ok(move |obs: &_| policy.act(obs).map_err(|e| e.to_string()))
-        },
-    )
-    .context("evaluation failed")?;
-    eprintln!("done in {:.1} s", start.elapsed().as_secs_f64());
-    if args.json {
-        println!("{}", serde_json::to_string(&result)?);
+    let engines = if args.engine.is_empty() {
+        vec![kumi_worlds::Engine::Rapier]
     } else {
-        print!(
-            "# Arm-reach skill: evaluation\n\n{provenance}\n{}",
-            result.markdown()
+        args.engine.clone()
+    };
+    for &engine in &engines {
+        crate::engine::choose(Some(engine), engine)?;
+    }
+    let mut results = Vec::new();
+    for &engine in &engines {
+        eprintln!(
+            "evaluating {} ({backend} backend, {engine} engine) over {} goals",
+            path.display(),
+            args.rollouts
         );
+        let start = Instant::now();
+        let result = evaluate(
+            model.clone(),
+            ArmReachConfig {
+                engine,
+                ..ArmReachConfig::default()
+            },
+            args.rollouts,
+            args.seed,
+            || {
+                let mut policy =
+                    SkillPolicy::load(&path, &skill, args.backend).map_err(|e| e.to_string())?;
+                Ok(move |obs: &_| policy.act(obs).map_err(|e| e.to_string()))
+            },
+        )
+        .context("evaluation failed")?;
+        eprintln!("done in {:.1} s", start.elapsed().as_secs_f64());
+        results.push(result);
+    }
+    if args.json {
+        // One object for one engine (the documented shape), an array for several.
+        match results.as_slice() {
+            [one] => println!("{}", serde_json::to_string(one)?),
+            many => println!("{}", serde_json::to_string(many)?),
+        }
+    } else {
+        print!("# Arm-reach skill: evaluation\n\n{provenance}");
+        for result in &results {
+            print!("\n{}", result.markdown());
+        }
+        if let [a, b] = results.as_slice() {
+            println!(
+                "\nBetween the engines ({} minus {}): mean position error {:+.4} m, mean orientation error {:+.4} rad.",
+                b.engine,
+                a.engine,
+                b.position_error_m.mean - a.position_error_m.mean,
+                b.orientation_error_rad.mean - a.orientation_error_rad.mean
+            );
+        }
     }
     Ok(())
 }

@@ -3,6 +3,7 @@
 mod arm;
 mod bench;
 mod bridge;
+mod engine;
 mod eval;
 mod sim;
 mod train;

@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel, Role};
-use kumi_sim::{Layout, SimConfig, World};
+use kumi_worlds::{Engine, Layout, SimConfig, SimWorld};
 use nalgebra::Vector3;
 use serde::Serialize;
 
@@ -38,12 +38,18 @@ impl From<LayoutArg> for Layout {
 /// [`SimConfig::for_model`] (the defaults and its morphology's `[physics]` table).
 #[derive(Args, Clone, Debug)]
 pub struct PhysicsArgs {
+    /// Physics engine: rapier (default) or mujoco (with `--features mujoco`).
+    #[arg(long, value_parser = crate::engine::parse)]
+    pub engine: Option<Engine>,
     /// Articulation layout (default: the morphology's).
     #[arg(long, value_enum)]
     pub layout: Option<LayoutArg>,
-    /// Physics steps per control step.
+    /// Physics steps per control step (rapier).
     #[arg(long)]
     pub substeps: Option<u32>,
+    /// Physics steps per control step in MuJoCo (default: 4, or the morphology's).
+    #[arg(long)]
+    pub mujoco_substeps: Option<u32>,
     /// Solver iterations per physics step.
     #[arg(long)]
     pub iterations: Option<u32>,
@@ -60,6 +66,9 @@ impl PhysicsArgs {
         }
         if let Some(s) = self.substeps {
             c.substeps = s;
+        }
+        if let Some(s) = self.mujoco_substeps {
+            c.mujoco_substeps = s;
         }
         if let Some(i) = self.iterations {
             c.solver_iterations = i;
@@ -91,6 +100,7 @@ pub struct SimArgs {
 #[derive(Serialize)]
 struct SimReport {
     morphology: String,
+    engine: String,
     config: String,
     seconds: f64,
     control_steps: u64,
@@ -110,7 +120,7 @@ struct SimReport {
 
 /// The sign that makes a wheel module drive the base along its +x: the module's own forward
 /// axis (body x) projected on the base x axis at the start.
-pub fn wheel_directions(world: &World) -> Vec<(String, f64)> {
+pub fn wheel_directions(world: &dyn SimWorld) -> Vec<(String, f64)> {
     let base = world.base_pose();
     let base_x = base.rotation * Vector3::x();
     world
@@ -133,8 +143,10 @@ pub fn run(args: SimArgs) -> Result<()> {
     }
     let model = load_model(&args.morphology)?;
     let config = args.physics.config(&model);
-    let mut world = World::new(model.clone(), config).context("building the world")?;
-    for (module, sign) in wheel_directions(&world) {
+    let engine = crate::engine::choose(args.physics.engine, Engine::Rapier)?;
+    let mut world =
+        crate::engine::world(engine, model.clone(), config).context("building the world")?;
+    for (module, sign) in wheel_directions(world.as_ref()) {
         world.set_wheel_velocity(&module, sign * args.wheel_velocity)?;
     }
     let start = world.base_pose().translation.vector;
@@ -165,7 +177,8 @@ pub fn run(args: SimArgs) -> Result<()> {
     let end = world.base_pose().translation.vector;
     let report = SimReport {
         morphology: model.name.clone(),
-        config: config.label(),
+        engine: engine.to_string(),
+        config: config.label_for(engine),
         seconds: args.seconds,
         control_steps: steps,
         wall_s,
@@ -185,8 +198,8 @@ pub fn run(args: SimArgs) -> Result<()> {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         println!(
-            "{} for {} s simulated ({} control steps at {} Hz, physics {})",
-            report.morphology, report.seconds, steps, config.control_hz, report.config
+            "{} for {} s simulated ({} control steps at {} Hz, {} physics {})",
+            report.morphology, report.seconds, steps, config.control_hz, engine, report.config
         );
         println!(
             "  wall time           {:.2} s ({:.1}x real time)",

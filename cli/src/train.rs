@@ -41,6 +41,9 @@ pub struct TrainArmArgs {
     /// Where metrics (metrics.csv) and checkpoints (checkpoint/) go.
     #[arg(long, default_value = "runs/arm_reach")]
     pub out: PathBuf,
+    /// Physics engine (default: mujoco when this build has it, else rapier).
+    #[arg(long, value_parser = crate::engine::parse)]
+    pub engine: Option<kumi_worlds::Engine>,
     /// Continue from a checkpoint directory (parameters, observation statistics, step count;
     /// Adam's moments restart).
     #[arg(long)]
@@ -134,11 +137,24 @@ pub fn run(what: TrainCommand) -> Result<()> {
         reward: file.reward,
     };
     let model = load_model("arm")?;
+    let engine = crate::engine::choose(args.engine, kumi_worlds::default_training_engine())?;
+    eprintln!(
+        "training on the {engine} engine{}",
+        if args.engine.is_none() && engine == kumi_worlds::Engine::Rapier {
+            format!(
+                " (MuJoCo, about 10x faster, is not in this build: {})",
+                kumi_worlds::MUJOCO_INSTALL_HINT
+            )
+        } else {
+            String::new()
+        }
+    );
     let envs = (0..config.num_envs)
         .map(|i| {
             ArmReach::new(
                 model.clone(),
                 ArmReachConfig {
+                    engine,
                     weights: file.reward,
                     ..ArmReachConfig::default()
                 },
@@ -213,7 +229,7 @@ pub fn run(what: TrainCommand) -> Result<()> {
     // The deterministic actor, normalisation included, with the skill's metadata.
     let metadata = kumi_policies::skill::ArmSkill::new(
         &model.modules[0],
-        kumi_sim::SimConfig::for_model(&model).control_hz,
+        kumi_worlds::SimConfig::for_model(&model).control_hz,
     )?
     .metadata(
         // Of the values, not the text: comments and layout do not change what was trained.

@@ -72,6 +72,7 @@ impl Bridge {
         let model = shipped_model(morphology);
         let config = BridgeConfig {
             model,
+            engine: kumi_worlds::Engine::Rapier,
             robot: robot.to_string(),
             domain_id: domain,
             mode,

@@ -172,7 +172,7 @@ fn the_shipped_policy_drives_every_arm_module_of_every_morphology() {
     let mut driven = Vec::new();
     for name in ["arm", "minimal", "dragon", "tricycle"] {
         let robot = kumi_tests::shipped_model(name);
-        let control_hz = kumi_sim::SimConfig::for_model(&robot).control_hz;
+        let control_hz = kumi_worlds::SimConfig::for_model(&robot).control_hz;
         for module in robot.modules.iter().filter(|m| m.kind == "arm") {
             let skill = ArmSkill::new(module, control_hz).unwrap();
             let mut policy = SkillPolicy::load(&shipped, &skill, BackendChoice::Tract)

@@ -1,6 +1,6 @@
 //! The low-level environment (SPEC section 4): one arm module with its base fixed, reaching
 //! goals in its base frame. A thin shell: observation, action and reward are the shared pure
-//! functions of `kumi-policies` and [`crate::reward`]; physics is `kumi-sim`.
+//! functions of `kumi-policies` and [`crate::reward`]; physics is any engine of `kumi-worlds`.
 
 use std::sync::Arc;
 
@@ -9,7 +9,7 @@ use kumi_policies::goal::{GoalNoise, GoalRange};
 use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::rotation::orientation_error;
 use kumi_policies::skill::{ArmSkill, SkillError};
-use kumi_sim::{apply_increments, RobotState, SimConfig, SimError, World};
+use kumi_worlds::{apply_increments, Engine, RobotState, SimConfig, SimError, SimWorld};
 use nalgebra::Isometry3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -19,6 +19,8 @@ use crate::reward::{reach_terms, ReachTerms, ReachWeights};
 /// Episode and task settings. Defaults are the paper's (section IV-A) and kumi's reward weights.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ArmReachConfig {
+    /// The physics engine the arm is simulated in.
+    pub engine: Engine,
     /// Control steps per episode (360 at 30 Hz: 12 s).
     pub episode_steps: usize,
     /// Control steps between goal resamples (120 at 30 Hz: 4 s).
@@ -33,6 +35,7 @@ pub struct ArmReachConfig {
 impl Default for ArmReachConfig {
     fn default() -> Self {
         Self {
+            engine: Engine::Rapier,
             episode_steps: 360,
             goal_period_steps: 120,
             initial_joint_range: 0.5,
@@ -74,7 +77,7 @@ pub struct StepOutcome {
 
 /// One fixed-base arm reaching goals.
 pub struct ArmReach {
-    world: World,
+    world: Box<dyn SimWorld>,
     module: String,
     ee_link: String,
     base_link: String,
@@ -113,7 +116,7 @@ impl ArmReach {
         let ee_link = arm.ee_link.clone().ok_or_else(not_arm)?;
         let sim = SimConfig::for_model(&model);
         let skill = ArmSkill::new(arm, sim.control_hz)?;
-        let world = World::new(model.clone(), sim)?;
+        let world = kumi_worlds::build(config.engine, model.clone(), sim)?;
         let goal = Goal {
             position_b: Default::default(),
             orientation_b: Default::default(),
@@ -205,8 +208,8 @@ impl ArmReach {
     }
 
     /// The simulated world (read-only), e.g. to rebuild an observation from its state.
-    pub fn world(&self) -> &World {
-        &self.world
+    pub fn world(&self) -> &dyn SimWorld {
+        self.world.as_ref()
     }
 
     /// The goal as the policy sees it this step (with this step's noise).

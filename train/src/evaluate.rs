@@ -60,6 +60,8 @@ impl ErrorStats {
 /// The evaluation's result, as `kumi eval arm --json` prints it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Evaluation {
+    /// The physics engine the rollouts ran in.
+    pub engine: String,
     pub rollouts: usize,
     pub position_error_m: ErrorStats,
     pub orientation_error_rad: ErrorStats,
@@ -75,8 +77,9 @@ impl Evaluation {
             )
         };
         format!(
-            "| final error ({} rollouts) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}",
+            "| final error ({} rollouts, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}",
             self.rollouts,
+            self.engine,
             row("position [m]", &self.position_error_m),
             row("orientation [rad]", &self.orientation_error_rad),
         )
@@ -133,6 +136,7 @@ where
     let ends: Vec<(f64, f64)> = per_episode.into_iter().flatten().take(rollouts).collect();
     let (p, o): (Vec<f64>, Vec<f64>) = ends.iter().copied().unzip();
     Ok(Evaluation {
+        engine: config.engine.to_string(),
         rollouts: ends.len(),
         position_error_m: ErrorStats::of(&p),
         orientation_error_rad: ErrorStats::of(&o),
@@ -160,12 +164,14 @@ mod tests {
     #[test]
     fn json_has_the_documented_shape() {
         let e = Evaluation {
+            engine: "rapier".into(),
             rollouts: 2,
             position_error_m: ErrorStats::of(&[0.1, 0.3]),
             orientation_error_rad: ErrorStats::of(&[0.5, 0.5]),
         };
         let v: serde_json::Value = serde_json::to_value(&e).unwrap();
         assert_eq!(v["rollouts"], 2);
+        assert_eq!(v["engine"], "rapier");
         for key in ["mean", "std", "median", "p90"] {
             assert!(v["position_error_m"][key].is_number(), "{key}");
             assert!(v["orientation_error_rad"][key].is_number(), "{key}");

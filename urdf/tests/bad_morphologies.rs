@@ -282,3 +282,17 @@ fn a_physics_layout_is_read() {
     .unwrap();
     assert_eq!(m.physics.layout, Some(kumi_model::Layout::SingleMultibody));
 }
+
+#[test]
+fn a_mujoco_step_is_read_and_zero_refused() {
+    let m = Morphology::parse(
+        FILE,
+        &format!("{BASE}\n[physics]\nmujoco_substeps = 8\n"),
+        &ModuleLibrary::shipped(),
+    )
+    .unwrap();
+    assert_eq!(m.physics.mujoco_substeps, Some(8));
+    let err = parse(&format!("{BASE}\n[physics]\nmujoco_substeps = 0\n"));
+    assert_eq!(err.field, "physics.mujoco_substeps");
+    assert!(err.to_string().contains("at least 1"), "{err}");
+}

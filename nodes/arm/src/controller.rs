@@ -1,12 +1,12 @@
 //! The arm node's control step, free of ROS: from the latest goal and joint state to the next
 //! joint targets. The observation is built by [`kumi_policies::observation::build`], the
 //! function the training environment uses, and the action is applied by
-//! [`ArmSkill::increments`] and [`kumi_sim::apply_increments`], as in training.
+//! [`ArmSkill::increments`] and [`kumi_engine::apply_increments`], as in training.
 
+use kumi_engine::apply_increments;
 use kumi_model::Actuator;
 use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::ArmSkill;
-use kumi_sim::apply_increments;
 
 use crate::joints::Joints;
 

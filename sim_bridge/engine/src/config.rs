@@ -64,6 +64,15 @@ impl SimConfig {
         1.0 / (self.control_hz * f64::from(self.mujoco_substeps))
     }
 
+    /// The label of this configuration in `engine`: [`SimConfig::label`] for rapier,
+    /// `mujoco/<substeps>sub` for MuJoCo (which has no rapier solver settings).
+    pub fn label_for(&self, engine: crate::Engine) -> String {
+        match engine {
+            crate::Engine::Rapier => self.label(),
+            crate::Engine::Mujoco => format!("mujoco/{}sub", self.mujoco_substeps),
+        }
+    }
+
     /// A short label for reports: `per-limb/4x4/stab0` (layout / substeps x iterations /
     /// stabilisation passes).
     pub fn label(&self) -> String {

@@ -20,7 +20,10 @@ pub fn mount_is_impulse(model: &RobotModel, layout: Layout, joint: &urdf_rs::Joi
         Layout::PerLimb => {
             // A module with children starts its own multibody; leaves stay in their parent's.
             let child = joint.child.link.as_str();
-            let Some(module) = model.modules.iter().find(|m| m.links.iter().any(|l| l == child))
+            let Some(module) = model
+                .modules
+                .iter()
+                .find(|m| m.links.iter().any(|l| l == child))
             else {
                 return false;
             };

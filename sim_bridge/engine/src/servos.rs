@@ -73,7 +73,12 @@ impl ServoBank {
             self.actuators.len(),
             "one joint position per actuator"
         );
-        for ((state, a), &q) in self.states.iter_mut().zip(&self.actuators).zip(joint_positions) {
+        for ((state, a), &q) in self
+            .states
+            .iter_mut()
+            .zip(&self.actuators)
+            .zip(joint_positions)
+        {
             *state = ServoState::holding(a.mode, q);
         }
     }
@@ -85,7 +90,12 @@ impl ServoBank {
 
     /// Sets the commands of a module's joints of one mode, each clamped to its limits. A wrong
     /// count, module or mode, or any non-finite value, rejects the whole command.
-    pub fn set(&mut self, module: &str, mode: ActuatorMode, values: &[f64]) -> Result<(), SimError> {
+    pub fn set(
+        &mut self,
+        module: &str,
+        mode: ActuatorMode,
+        values: &[f64],
+    ) -> Result<(), SimError> {
         let indices: Vec<usize> = self
             .module_range(module)?
             .filter(|&i| self.actuators[i].mode == mode)

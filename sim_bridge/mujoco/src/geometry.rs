@@ -9,8 +9,13 @@ pub enum GeomShape {
     /// Half extents [m].
     Box([f64; 3]),
     /// Radius and half length along local z [m].
-    Cylinder { radius: f64, half_length: f64 },
-    Sphere { radius: f64 },
+    Cylinder {
+        radius: f64,
+        half_length: f64,
+    },
+    Sphere {
+        radius: f64,
+    },
 }
 
 /// The lowest world z [m] of a shape at `position` with rotation matrix `r` (local to world).
@@ -64,6 +69,9 @@ mod tests {
         // A wheel: cylinder axis horizontal, touches at its radius.
         let side = *Rotation3::from_euler_angles(std::f64::consts::FRAC_PI_2, 0.0, 0.0).matrix();
         assert!((lowest_z(cyl, &at, &side) - 0.73).abs() < 1e-12);
-        assert_eq!(lowest_z(GeomShape::Sphere { radius: 0.05 }, &at, &side), 0.95);
+        assert_eq!(
+            lowest_z(GeomShape::Sphere { radius: 0.05 }, &at, &side),
+            0.95
+        );
     }
 }

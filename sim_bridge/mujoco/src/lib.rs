@@ -30,4 +30,3 @@ pub fn unavailable() -> SimError {
         reason: format!("this kumi was built without MuJoCo: {INSTALL_HINT}"),
     }
 }
-

@@ -153,7 +153,12 @@ pub fn build(model: &RobotModel, config: &SimConfig) -> Result<Mjcf, SimError> {
         // Placed by every reset; start clear of the ground.
         " pos=\"0 0 1\"".to_string()
     };
-    writeln!(body_xml, "    <body name=\"{}\"{root_pose}>", body_name(root_name)).unwrap();
+    writeln!(
+        body_xml,
+        "    <body name=\"{}\"{root_pose}>",
+        body_name(root_name)
+    )
+    .unwrap();
     if !model.fixed_base {
         writeln!(body_xml, "      <freejoint name=\"root\"/>").unwrap();
     }
@@ -232,7 +237,11 @@ pub fn build(model: &RobotModel, config: &SimConfig) -> Result<Mjcf, SimError> {
 /// thread) arm 45,700 dense against 35,700 sparse, Dragon (24 dofs) even, Tricycle (40 dofs)
 /// 3,290 dense against 3,760 sparse.
 fn jacobian(tree: &KinematicTree, fixed_base: bool) -> &'static str {
-    let moving = tree.joints().iter().filter(|j| j.kind != JointKind::Fixed).count();
+    let moving = tree
+        .joints()
+        .iter()
+        .filter(|j| j.kind != JointKind::Fixed)
+        .count();
     let dofs = moving + if fixed_base { 0 } else { 6 };
     if dofs > 30 {
         "sparse"
@@ -324,7 +333,13 @@ impl Ctx<'_> {
         let actuator = self.model.actuators().find(|a| a.joint == j.name);
         // Servos: the model's damping, friction, armature and range; passive joints: the URDF's.
         let (damping, friction, armature, lower, upper) = match actuator {
-            Some(a) => (a.joint_damping, a.joint_friction, a.armature, a.lower, a.upper),
+            Some(a) => (
+                a.joint_damping,
+                a.joint_friction,
+                a.armature,
+                a.lower,
+                a.upper,
+            ),
             None => {
                 let d = urdf_joint.dynamics.clone().unwrap_or_default();
                 let limited = urdf_joint.joint_type == urdf_rs::JointType::Revolute;

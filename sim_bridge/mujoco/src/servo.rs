@@ -108,6 +108,9 @@ mod tests {
         );
         // The same step with the real limit: |tau| exceeds 136 N m only if the prediction does.
         let limited = servo_force(&a, at(0.004), 0.0, v, f, m, h);
-        assert_eq!(tau.abs() > 136.0, matches!(limited, ServoForce::Saturated { .. }));
+        assert_eq!(
+            tau.abs() > 136.0,
+            matches!(limited, ServoForce::Saturated { .. })
+        );
     }
 }

@@ -82,7 +82,8 @@ impl MujocoWorld {
             source,
         })?;
         let spec = mjcf::build(&model, &config)?;
-        let mj = MjModel::from_xml_string(&spec.xml).map_err(|e| rejected(&model, e.to_string()))?;
+        let mj =
+            MjModel::from_xml_string(&spec.xml).map_err(|e| rejected(&model, e.to_string()))?;
         let body_id = |name: &str| {
             mj.name_to_id(MjtObjBase::mjOBJ_BODY, name)
                 .ok_or_else(|| rejected(&model, format!("no body `{name}` in the compiled model")))
@@ -193,8 +194,8 @@ impl MujocoWorld {
             };
             // Forces on the dof other than this servo's: passive (less the servo damping
             // MuJoCo already added) minus bias (gravity, Coriolis).
-            let other = self.data.qfrc_passive()[j.dof] + servo_damping * v
-                - self.data.qfrc_bias()[j.dof];
+            let other =
+                self.data.qfrc_passive()[j.dof] + servo_damping * v - self.data.qfrc_bias()[j.dof];
             let inertia = self.data.m()[j.m_diag];
             let force = servo_force(a, target, q, v, other, inertia, dt);
             let (applied, saturated) = match force {
@@ -350,11 +351,17 @@ impl SimWorld for MujocoWorld {
     }
 
     fn joint_positions(&self) -> Vec<f64> {
-        self.joints.iter().map(|j| self.data.qpos()[j.qpos]).collect()
+        self.joints
+            .iter()
+            .map(|j| self.data.qpos()[j.qpos])
+            .collect()
     }
 
     fn joint_velocities(&self) -> Vec<f64> {
-        self.joints.iter().map(|j| self.data.qvel()[j.dof]).collect()
+        self.joints
+            .iter()
+            .map(|j| self.data.qvel()[j.dof])
+            .collect()
     }
 
     fn link_pose(&self, link: &str) -> Result<Isometry3<f64>, SimError> {

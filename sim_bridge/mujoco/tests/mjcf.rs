@@ -34,8 +34,14 @@ fn every_shipped_robot_has_a_model_with_its_masses_joints_and_frictions() {
                 .lines()
                 .find(|l| l.contains(&format!("<joint name=\"{}\"", a.joint)))
                 .unwrap();
-            assert!(line.contains(&format!("armature=\"{}\"", a.armature)), "{line}");
-            assert!(line.contains(&format!("damping=\"{}\"", a.joint_damping)), "{line}");
+            assert!(
+                line.contains(&format!("armature=\"{}\"", a.armature)),
+                "{line}"
+            );
+            assert!(
+                line.contains(&format!("damping=\"{}\"", a.joint_damping)),
+                "{line}"
+            );
         }
         // Every mass of the URDF, once.
         let urdf_mass: f64 = m.urdf.links.iter().map(|l| l.inertial.mass.value).sum();
@@ -45,7 +51,10 @@ fn every_shipped_robot_has_a_model_with_its_masses_joints_and_frictions() {
             .skip(1)
             .map(|s| s[..s.find('"').unwrap()].parse::<f64>().unwrap())
             .sum();
-        assert!((urdf_mass - mjcf_mass).abs() < 1e-9, "{name}: {urdf_mass} vs {mjcf_mass}");
+        assert!(
+            (urdf_mass - mjcf_mass).abs() < 1e-9,
+            "{name}: {urdf_mass} vs {mjcf_mass}"
+        );
         assert_eq!(out.xml.contains("<freejoint"), !m.fixed_base, "{name}");
     }
 }
@@ -67,7 +76,10 @@ fn the_tyres_take_their_friction_and_the_smaller_friction_wins() {
         .lines()
         .find(|l| l.contains("friction=\"0.8 0 0\""))
         .unwrap();
-    assert!(arm.contains("priority=\"1\"") && line.contains("priority=\"0\""), "{arm}\n{line}");
+    assert!(
+        arm.contains("priority=\"1\"") && line.contains("priority=\"0\""),
+        "{arm}\n{line}"
+    );
 }
 
 #[test]
@@ -84,17 +96,31 @@ fn a_mesh_collision_is_refused_naming_the_module_and_the_reason() {
         scale: None,
     };
     let err = mjcf::build(&m, &SimConfig::for_model(&m)).unwrap_err();
-    assert!(matches!(err, SimError::Unsupported { ref module, .. } if module == "leg1"), "{err}");
+    assert!(
+        matches!(err, SimError::Unsupported { ref module, .. } if module == "leg1"),
+        "{err}"
+    );
     let text = err.to_string();
-    assert!(text.contains("leg1") && text.contains("Mesh") && text.contains("mujoco"), "{text}");
+    assert!(
+        text.contains("leg1") && text.contains("Mesh") && text.contains("mujoco"),
+        "{text}"
+    );
 }
 
 #[test]
 fn a_prismatic_joint_is_refused_naming_the_module() {
     let mut m = model("arm");
-    let j = m.urdf.joints.iter_mut().find(|j| j.name == "arm/joint3").unwrap();
+    let j = m
+        .urdf
+        .joints
+        .iter_mut()
+        .find(|j| j.name == "arm/joint3")
+        .unwrap();
     j.joint_type = urdf_rs::JointType::Prismatic;
     let err = mjcf::build(&Arc::new(m.clone()), &SimConfig::for_model(&m)).unwrap_err();
     let text = err.to_string();
-    assert!(text.contains("module `arm`") && text.contains("prismatic"), "{text}");
+    assert!(
+        text.contains("module `arm`") && text.contains("prismatic"),
+        "{text}"
+    );
 }

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use kumi_model::{Actuator, ActuatorMode, RobotModel};
-use kumi_sim::apply_increments;
+use kumi_worlds::apply_increments;
 
 /// Why a command was refused. Each kind is counted in `/diagnostics`.
 #[derive(Debug, Clone, PartialEq)]

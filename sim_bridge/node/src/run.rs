@@ -13,7 +13,7 @@ use kumi_msgs::rosgraph_msgs::Clock;
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_msgs::std_msgs::{Float64, Float64MultiArray, Header, StringMsg};
 use kumi_ros::{qos, topics, RateLimited, RosError, RosNode};
-use kumi_sim::{SimConfig, SimError, World};
+use kumi_worlds::{Engine, SimConfig, SimError, SimWorld};
 use nalgebra::Vector3;
 use ros2_client::{Publisher, Subscription};
 use tracing::{info, warn};
@@ -38,6 +38,8 @@ pub enum Mode {
 #[derive(Debug, Clone)]
 pub struct BridgeConfig {
     pub model: Arc<RobotModel>,
+    /// The physics engine (rapier by default).
+    pub engine: Engine,
     /// The robot name: the namespace of every topic.
     pub robot: String,
     /// ROS domain id.
@@ -230,7 +232,11 @@ fn drain(inputs: &ModuleInputs, malformed: &mut u64) -> Vec<Incoming> {
 }
 
 /// Applies a validated update to the world; returns whether any value was clamped.
-fn apply(world: &mut World, commands: &mut Commands, update: &Update) -> Result<bool, SimError> {
+fn apply(
+    world: &mut dyn SimWorld,
+    commands: &mut Commands,
+    update: &Update,
+) -> Result<bool, SimError> {
     match update {
         Update::PositionTargets { module, targets } => {
             world.set_position_targets(module, targets)?;
@@ -248,7 +254,7 @@ fn apply(world: &mut World, commands: &mut Commands, update: &Update) -> Result<
     }
 }
 
-fn module_positions(world: &World, model: &RobotModel) -> BTreeMap<String, Vec<f64>> {
+fn module_positions(world: &dyn SimWorld, model: &RobotModel) -> BTreeMap<String, Vec<f64>> {
     let q = world.joint_positions();
     model
         .modules
@@ -269,7 +275,7 @@ fn module_positions(world: &World, model: &RobotModel) -> BTreeMap<String, Vec<f
 pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), BridgeError> {
     check_config(&config)?;
     let model = config.model.clone();
-    let mut world = World::new(model.clone(), SimConfig::for_model(&model))?;
+    let mut world = kumi_worlds::build(config.engine, model.clone(), SimConfig::for_model(&model))?;
     let tree =
         KinematicTree::new(&model.urdf).map_err(|e| BridgeError::BadConfig(e.to_string()))?;
     let control_dt = 1.0 / world.config().control_hz;
@@ -295,7 +301,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
 
     let mut commands = Commands::new(
         &model,
-        &module_positions(&world, &model),
+        &module_positions(world.as_ref(), &model),
         config.stale_after_s,
     );
     let mut lockstep = Lockstep::default();
@@ -311,7 +317,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     let mut diag_at = Instant::now() + Duration::from_secs(1);
     let mut diag_window = (Instant::now(), 0_u64);
 
-    let publish_state = |world: &World, steps: u64, accel_w: &Vector3<f64>| {
+    let publish_state = |world: &dyn SimWorld, steps: u64, accel_w: &Vector3<f64>| {
         let stamp = Time::from_seconds(steps as f64 * control_dt);
         let robot = &config.robot;
         for (module, publisher) in &io.joint_states {
@@ -324,7 +330,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         let _ = io.tf.publish(state::transforms(world, &tree, robot, stamp));
         let _ = io.clock.publish(Clock { clock: stamp });
     };
-    publish_state(&world, steps, &accel_w);
+    publish_state(world.as_ref(), steps, &accel_w);
 
     while !shutdown.load(Ordering::Relaxed) {
         let now_s = steps as f64 * control_dt;
@@ -340,7 +346,8 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
                 };
                 match result {
                     Ok(update) => {
-                        counters.clamped += u64::from(apply(&mut world, &mut commands, &update)?);
+                        counters.clamped +=
+                            u64::from(apply(world.as_mut(), &mut commands, &update)?);
                         lockstep.received(&inputs.name);
                     }
                     Err(rejection) => {
@@ -357,21 +364,21 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             Mode::Lockstep { timeout } => {
                 let timed_out = last_step_at.elapsed() >= timeout;
                 if timed_out && !lockstep.active() {
-                    publish_state(&world, steps, &accel_w);
+                    publish_state(world.as_ref(), steps, &accel_w);
                     last_step_at = Instant::now();
                 }
                 lockstep.ready() || (timed_out && lockstep.active())
             }
         };
         if due {
-            for update in commands.expire(now_s, &module_positions(&world, &model)) {
+            for update in commands.expire(now_s, &module_positions(world.as_ref(), &model)) {
                 counters.stale_holds += 1;
                 warn!(
                     "{}: commands stopped for {} s of sim time; holding position",
                     module_of(&update),
                     config.stale_after_s
                 );
-                apply(&mut world, &mut commands, &update)?;
+                apply(world.as_mut(), &mut commands, &update)?;
             }
             world.step();
             steps += 1;
@@ -380,7 +387,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             last_linvel = linvel;
             lockstep.stepped();
             last_step_at = Instant::now();
-            publish_state(&world, steps, &accel_w);
+            publish_state(world.as_ref(), steps, &accel_w);
             if let Mode::RealTime { factor } = config.mode {
                 next_tick += Duration::from_secs_f64(control_dt / factor);
                 // Fell far behind (a stall): resynchronise rather than sprint to catch up.

@@ -8,7 +8,7 @@ use kumi_msgs::sensor_msgs::{Imu, JointState};
 use kumi_msgs::std_msgs::Header;
 use kumi_msgs::tf2_msgs::TFMessage;
 use kumi_ros::geometry;
-use kumi_sim::World;
+use kumi_worlds::SimWorld;
 use nalgebra::Vector3;
 
 /// Gravity in the world frame [m/s^2].
@@ -25,7 +25,7 @@ fn header(stamp: Time, frame_id: String) -> Header {
 }
 
 /// One module's joint state: names (URDF joint names), positions [rad], velocities [rad/s].
-pub fn joint_state(world: &World, module: &str, stamp: Time) -> Option<JointState> {
+pub fn joint_state(world: &dyn SimWorld, module: &str, stamp: Time) -> Option<JointState> {
     let range = world.module_range(module).ok()?;
     let names = world.actuator_names();
     let q = world.joint_positions();
@@ -40,7 +40,7 @@ pub fn joint_state(world: &World, module: &str, stamp: Time) -> Option<JointStat
 }
 
 /// Base odometry: pose in `<robot>/odom`, twist in the base frame.
-pub fn odometry(world: &World, robot: &str, stamp: Time) -> Odometry {
+pub fn odometry(world: &dyn SimWorld, robot: &str, stamp: Time) -> Odometry {
     let base = world.base_pose();
     let (v_w, w_w) = world.base_twist_w();
     let r_inv = base.rotation.inverse();
@@ -64,7 +64,7 @@ pub fn odometry(world: &World, robot: &str, stamp: Time) -> Odometry {
 /// The base IMU: orientation in `<robot>/odom`; angular velocity [rad/s] and specific force
 /// [m/s^2] (acceleration minus gravity: +9.81 up at rest) in the base frame. `accel_w` is the
 /// base's linear acceleration in the world frame.
-pub fn imu(world: &World, robot: &str, accel_w: &Vector3<f64>, stamp: Time) -> Imu {
+pub fn imu(world: &dyn SimWorld, robot: &str, accel_w: &Vector3<f64>, stamp: Time) -> Imu {
     let base = world.base_pose();
     let (_, w_w) = world.base_twist_w();
     let r_inv = base.rotation.inverse();
@@ -80,7 +80,12 @@ pub fn imu(world: &World, robot: &str, accel_w: &Vector3<f64>, stamp: Time) -> I
 }
 
 /// `/tf` for every link: the base in `<robot>/odom`, then each joint's child in its parent.
-pub fn transforms(world: &World, tree: &KinematicTree, robot: &str, stamp: Time) -> TFMessage {
+pub fn transforms(
+    world: &dyn SimWorld,
+    tree: &KinematicTree,
+    robot: &str,
+    stamp: Time,
+) -> TFMessage {
     let poses: std::collections::HashMap<String, nalgebra::Isometry3<f64>> =
         world.body_poses().into_iter().collect();
     let links = tree.links();

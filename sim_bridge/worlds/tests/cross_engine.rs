@@ -6,7 +6,7 @@ mod common;
 
 use common::{model, world, Rng};
 use kumi_model::kinematics::KinematicTree;
-use kumi_worlds::{Engine, SimWorld};
+use kumi_worlds::Engine;
 use nalgebra::Isometry3;
 
 const ROBOTS: [&str; 4] = ["arm", "minimal", "dragon", "tricycle"];
@@ -52,7 +52,13 @@ fn both_engines_place_every_link_at_its_forward_kinematics() {
 }
 
 /// The arm's tool, in the base frame, over 2 s after a step of one joint from home.
-fn step_response(engine: Engine, name: &str, module: &str, joint: usize, delta: f64) -> Vec<Isometry3<f64>> {
+fn step_response(
+    engine: Engine,
+    name: &str,
+    module: &str,
+    joint: usize,
+    delta: f64,
+) -> Vec<Isometry3<f64>> {
     let mut w = world(engine, name);
     let range = w.module_range(module).unwrap();
     let mut q: Vec<f64> = w.commands()[range].to_vec();
@@ -109,8 +115,16 @@ fn joint_steps_agree_between_engines() {
                 ("arm", _) => 0.02,
                 _ => 0.025,
             };
-            assert!(worst < bound, "{name} joint{}: tools {worst} m apart", joint + 1);
-            assert!(last < 0.01, "{name} joint{}: settled {last} m apart", joint + 1);
+            assert!(
+                worst < bound,
+                "{name} joint{}: tools {worst} m apart",
+                joint + 1
+            );
+            assert!(
+                last < 0.01,
+                "{name} joint{}: settled {last} m apart",
+                joint + 1
+            );
         }
     }
 }
@@ -126,7 +140,8 @@ fn driving_agrees_between_engines() {
             for m in model.modules_with_role(kumi_model::Role::Wheel) {
                 let forward = (start.inverse() * w.link_pose(&m.root_link).unwrap()).rotation
                     * nalgebra::Vector3::x();
-                w.set_wheel_velocity(&m.name, 2.0 * forward.x.signum()).unwrap();
+                w.set_wheel_velocity(&m.name, 2.0 * forward.x.signum())
+                    .unwrap();
             }
             for _ in 0..90 {
                 w.step();

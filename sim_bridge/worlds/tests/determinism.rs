@@ -28,7 +28,10 @@ fn same_seed_same_commands_give_bit_identical_trajectories() {
             let b = trajectory(world(engine, name).as_mut(), 7, 90);
             assert_eq!(a, b, "{engine} {name}: two fresh worlds diverged");
             let c = trajectory(world(engine, name).as_mut(), 8, 90);
-            assert_ne!(a, c, "{engine} {name}: a different seed must change the trajectory");
+            assert_ne!(
+                a, c,
+                "{engine} {name}: a different seed must change the trajectory"
+            );
         }
     }
 }
@@ -104,5 +107,21 @@ fn a_snapshot_of_another_world_is_refused() {
                 "{b} accepted a snapshot of {a}"
             );
         }
+    }
+}
+
+/// CI (`.ci/run`, with `KUMI_REQUIRE_MUJOCO=1`) builds MuJoCo in: every parity test above then
+/// runs in both engines, and this fails if the build lost it.
+#[test]
+fn engines_under_test() {
+    let engines = engines();
+    println!("engines under test: {engines:?}");
+    assert_eq!(engines[0], kumi_worlds::Engine::Rapier);
+    if std::env::var_os("KUMI_REQUIRE_MUJOCO").is_some_and(|v| v == "1") {
+        assert!(
+            engines.contains(&kumi_worlds::Engine::Mujoco),
+            "KUMI_REQUIRE_MUJOCO=1 but this build has no MuJoCo: {}",
+            kumi_worlds::MUJOCO_INSTALL_HINT
+        );
     }
 }

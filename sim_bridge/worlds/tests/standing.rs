@@ -40,7 +40,10 @@ fn every_morphology_stands_60_s_at_home() {
                 "{engine} {name}: base tilted {} deg",
                 max_tilt.to_degrees()
             );
-            assert!(lowest > -0.005, "{engine} {name}: sank {lowest} m into the ground");
+            assert!(
+                lowest > -0.005,
+                "{engine} {name}: sank {lowest} m into the ground"
+            );
             for link in w.ground_contacts() {
                 assert!(
                     link.contains("wheel"),

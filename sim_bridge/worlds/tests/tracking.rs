@@ -3,8 +3,8 @@
 mod common;
 
 use common::{engines, world};
-use kumi_worlds::Engine;
 use kumi_model::kinematics::KinematicTree;
+use kumi_worlds::Engine;
 use nalgebra::Isometry3;
 
 /// Steps one joint at a time on the fixed-base arm and checks that after 3 s the tool frame is
