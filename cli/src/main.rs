@@ -30,6 +30,9 @@ enum Command {
     Urdf {
         /// `minimal`, `dragon`, `tricycle`, `arm`, or a path to a morphology file.
         morphology: String,
+        /// Print the MuJoCo model (MJCF) the MuJoCo engine builds from it instead.
+        #[arg(long)]
+        mjcf: bool,
     },
     /// Simulate a morphology for a while and report what happened.
     Sim(sim::SimArgs),
@@ -80,9 +83,14 @@ fn run() -> Result<()> {
         .init();
     let cli = Cli::parse();
     match cli.command {
-        Command::Urdf { morphology } => {
+        Command::Urdf { morphology, mjcf } => {
             let model = sim::load_model(&morphology)?;
-            print!("{}", model.urdf_xml());
+            if mjcf {
+                let config = kumi_worlds::SimConfig::for_model(&model);
+                print!("{}", kumi_worlds::mjcf(&model, &config)?);
+            } else {
+                print!("{}", model.urdf_xml());
+            }
             Ok(())
         }
         Command::Sim(args) => sim::run(args),

@@ -160,6 +160,13 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
         progress.contains("steps/s collect") && progress.contains("final error"),
         "{progress}"
     );
+    // Training says which engine it uses: MuJoCo where the build has it.
+    let engine = if cfg!(feature = "mujoco") {
+        "training on the mujoco engine"
+    } else {
+        "training on the rapier engine"
+    };
+    assert!(progress.contains(engine), "{progress}");
 }
 
 #[test]
@@ -241,4 +248,109 @@ fn arm_node_names_the_modules_it_could_drive() {
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("not an arm module"), "{stderr}");
+}
+
+#[test]
+fn an_unknown_engine_is_refused_with_the_known_ones() {
+    let out = kumi(&["sim", "arm", "--engine", "bullet"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("expected `rapier` or `mujoco`"), "{stderr}");
+}
+
+#[test]
+fn urdf_mjcf_prints_the_mujoco_model() {
+    let out = kumi(&["urdf", "minimal", "--mjcf"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let xml = String::from_utf8_lossy(&out.stdout);
+    assert!(xml.starts_with("<mujoco model=\"minimal\">"), "{xml}");
+    assert!(
+        xml.contains("<freejoint") && xml.contains("arm0/joint7"),
+        "{xml}"
+    );
+}
+
+#[cfg(feature = "mujoco")]
+mod mujoco {
+    use super::kumi;
+
+    #[test]
+    fn sim_runs_on_mujoco_and_says_so() {
+        let out = kumi(&[
+            "sim",
+            "dragon",
+            "--engine",
+            "mujoco",
+            "--seconds",
+            "2",
+            "--json",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(report["engine"], "mujoco");
+        assert_eq!(report["config"], "mujoco/4sub");
+        assert_eq!(report["finite"], true);
+    }
+
+    #[test]
+    fn bench_interleaves_engines() {
+        let out = kumi(&[
+            "bench",
+            "sim",
+            "--json",
+            "--models",
+            "arm",
+            "--seconds",
+            "0.5",
+            "--worlds",
+            "2",
+            "--engines",
+            "rapier,mujoco",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let records: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+        let engines: Vec<&str> = records
+            .iter()
+            .map(|r| r["engine"].as_str().unwrap())
+            .collect();
+        assert_eq!(engines, ["rapier", "rapier", "mujoco", "mujoco"]);
+    }
+
+    #[test]
+    fn eval_reports_each_engine() {
+        let out = kumi(&[
+            "eval",
+            "arm",
+            "--rollouts",
+            "6",
+            "--backend",
+            "tract",
+            "--engine",
+            "rapier,mujoco",
+            "--json",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v.len(), 2);
+        assert_eq!(
+            (v[0]["engine"].as_str(), v[1]["engine"].as_str()),
+            (Some("rapier"), Some("mujoco"))
+        );
+    }
 }

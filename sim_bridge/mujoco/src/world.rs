@@ -145,11 +145,6 @@ impl MujocoWorld {
         Ok(world)
     }
 
-    /// The generated MJCF model of a robot (for `kumi urdf --mjcf`-style inspection and tests).
-    pub fn mjcf(model: &RobotModel, config: &SimConfig) -> Result<String, SimError> {
-        Ok(mjcf::build(model, config)?.xml)
-    }
-
     fn body_pose(&self, body: usize) -> Isometry3<f64> {
         let p = self.data.xpos()[body];
         Isometry3::from_parts(

@@ -294,9 +294,10 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         robot = %config.robot,
         domain = node.domain_id(),
         mode = ?config.mode,
-        "sim bridge up: {} modules, physics {}",
+        "sim bridge up: {} modules, {} physics {}",
         model.modules.len(),
-        world.config().label()
+        config.engine,
+        world.config().label_for(config.engine)
     );
 
     let mut commands = Commands::new(

@@ -51,5 +51,11 @@ pub fn default_training_engine() -> Engine {
     }
 }
 
+/// The MuJoCo model (MJCF) that the MuJoCo engine builds for `model`; pure Rust, so it works
+/// in builds without MuJoCo too.
+pub fn mjcf(model: &RobotModel, config: &SimConfig) -> Result<String, SimError> {
+    Ok(kumi_mujoco::mjcf::build(model, config)?.xml)
+}
+
 /// The MuJoCo install hint, for messages that mention the engine choice.
 pub const MUJOCO_INSTALL_HINT: &str = kumi_mujoco::INSTALL_HINT;
