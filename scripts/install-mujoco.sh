@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Installs MuJoCo 3.17.0 for kumi's second physics engine, from its PyPI wheel (which ships
 # libmujoco.so.3.17.0), into target/mujoco: a virtual environment and lib/libmujoco.so, the
-# folder that .cargo/config.toml points the build (MUJOCO_DYNAMIC_LINK_DIR) and the binaries
-# (LD_LIBRARY_PATH) at. Nothing is downloaded at build time. Then build with `--features mujoco`.
+# folder that .cargo/config.toml points the build at (MUJOCO_DYNAMIC_LINK_DIR) and that binaries
+# find through their rpath. Nothing is downloaded at build time. Then build with
+# `--features mujoco`. `cargo clean` removes it: run this again after one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VERSION=3.17.0  # the MuJoCo that mujoco-rs =7.0.0 binds

@@ -132,6 +132,13 @@ pub trait SimWorld: Send {
     /// The world pose of every URDF link frame, in URDF link order.
     fn body_poses(&self) -> Vec<(String, Isometry3<f64>)>;
 
+    /// Whether the physics blew up since the last reset (MuJoCo detects non-finite or huge
+    /// accelerations and restarts itself from its initial state when they happen; rapier never
+    /// reports it). A diverged world's state means nothing until the next reset.
+    fn diverged(&self) -> bool {
+        false
+    }
+
     /// Actuated joint names, in the order of every per-joint vector of this API.
     fn actuator_names(&self) -> Vec<&str> {
         self.servos()

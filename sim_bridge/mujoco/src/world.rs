@@ -9,6 +9,7 @@ use kumi_engine::{
 use kumi_model::kinematics::KinematicTree;
 use kumi_model::RobotModel;
 use mujoco_rs::prelude::*;
+use mujoco_rs::wrappers::MjtWarning;
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
 use crate::geometry::{lowest_z, GeomShape};
@@ -29,6 +30,9 @@ struct ServoJoint {
 /// MuJoCo's state plus kumi's servo state: everything a snapshot restores.
 #[derive(Clone)]
 struct MujocoState {
+    /// The world it was taken from: the robot model (by identity) and the settings.
+    model: usize,
+    config: SimConfig,
     physics: Box<[f64]>,
     servos: Vec<ServoState>,
     saturated: Vec<bool>,
@@ -58,6 +62,8 @@ pub struct MujocoWorld {
     saturated: Vec<bool>,
     base_link: usize,
     time_s: f64,
+    /// MuJoCo reported a bad acceleration (and reset itself) since the last reset.
+    diverged: bool,
 }
 
 fn rejected(model: &RobotModel, message: String) -> SimError {
@@ -139,6 +145,7 @@ impl MujocoWorld {
             saturated: vec![false; n],
             base_link,
             time_s: 0.0,
+            diverged: false,
         };
         let home = world.home_state();
         world.reset(&home);
@@ -213,6 +220,10 @@ impl MujocoWorld {
             }
         }
         self.data.step2();
+        // MuJoCo counts bad accelerations (after restarting from its initial state).
+        if self.data.warning()[MjtWarning::mjWARN_BADQACC as usize].number > 0 {
+            self.diverged = true;
+        }
     }
 
     /// Joint positions in the kinematic tree's order from positions in actuator order.
@@ -309,10 +320,13 @@ impl SimWorld for MujocoWorld {
         self.set_damping();
         self.data.forward();
         self.time_s = 0.0;
+        self.diverged = false;
     }
 
     fn snapshot(&self) -> Snapshot {
         Snapshot::new(MujocoState {
+            model: Arc::as_ptr(&self.model) as usize,
+            config: self.config,
             physics: self.data.state(STATE_SPEC),
             servos: self.servos.states().to_vec(),
             saturated: self.saturated.clone(),
@@ -322,7 +336,8 @@ impl SimWorld for MujocoWorld {
 
     fn restore(&mut self, snapshot: &Snapshot) -> Result<(), SimError> {
         let s = snapshot.downcast::<MujocoState>()?;
-        if s.servos.len() != self.joints.len()
+        if s.model != Arc::as_ptr(&self.model) as usize
+            || s.config != self.config
             || s.physics.len() != self.data.model().state_size(STATE_SPEC)
         {
             return Err(SimError::ForeignSnapshot);
@@ -342,6 +357,12 @@ impl SimWorld for MujocoWorld {
         for _ in 0..self.config.mujoco_substeps {
             self.physics_step();
         }
+        // mj_step2 leaves link poses at the positions before its integration: bring them to the
+        // new positions, so that poses agree with joint positions (contacts stay those the
+        // last physics step solved). The next mj_step1 recomputes them anyway: the trajectory
+        // is the same.
+        self.data.kinematics();
+        self.data.com_pos();
         self.time_s += 1.0 / self.config.control_hz;
     }
 
@@ -445,6 +466,10 @@ impl SimWorld for MujocoWorld {
                 ))
             })
             .collect()
+    }
+
+    fn diverged(&self) -> bool {
+        self.diverged
     }
 
     fn body_poses(&self) -> Vec<(String, Isometry3<f64>)> {

@@ -17,6 +17,9 @@ use crate::spawn::{link_pose, place_body, spawn, ArticulatedJoint, LinkBody};
 /// Everything needed to restore rapier's physics exactly as it was.
 #[derive(Clone)]
 struct RapierState {
+    /// The world it was taken from: the robot model (by identity) and the settings.
+    model: usize,
+    config: SimConfig,
     islands: IslandManager,
     broad_phase: BroadPhaseBvh,
     narrow_phase: NarrowPhase,
@@ -30,8 +33,16 @@ struct RapierState {
 }
 
 impl RapierState {
-    fn capture(physics: &PhysicsWorld, servos: &[ServoState], time_s: f64) -> Self {
+    fn capture(
+        model: &Arc<RobotModel>,
+        config: SimConfig,
+        physics: &PhysicsWorld,
+        servos: &[ServoState],
+        time_s: f64,
+    ) -> Self {
         Self {
+            model: Arc::as_ptr(model) as usize,
+            config,
             islands: physics.islands.clone(),
             broad_phase: physics.broad_phase.clone(),
             narrow_phase: physics.narrow_phase.clone(),
@@ -91,7 +102,7 @@ impl World {
             .link_index(&model.base_link)
             .expect("the base link is in the URDF");
         let servos = ServoBank::new(&model);
-        let pristine = RapierState::capture(&physics, servos.states(), 0.0);
+        let pristine = RapierState::capture(&model, config, &physics, servos.states(), 0.0);
         let mut world = Self {
             model,
             config,
@@ -247,6 +258,8 @@ impl SimWorld for World {
 
     fn snapshot(&self) -> Snapshot {
         Snapshot::new(RapierState::capture(
+            &self.model,
+            self.config,
             &self.physics,
             self.servos.states(),
             self.time_s,
@@ -255,7 +268,7 @@ impl SimWorld for World {
 
     fn restore(&mut self, snapshot: &Snapshot) -> Result<(), SimError> {
         let state = snapshot.downcast::<RapierState>()?.clone();
-        if state.servos.len() != self.servos.states().len() {
+        if state.model != Arc::as_ptr(&self.model) as usize || state.config != self.config {
             return Err(SimError::ForeignSnapshot);
         }
         self.restore_owned(state);

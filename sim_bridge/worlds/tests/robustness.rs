@@ -44,6 +44,11 @@ fn random_targets_for_60_s_stay_finite_and_bounded() {
                 w.time()
             );
             assert!(w.joint_positions().iter().all(|q| q.is_finite()));
+            assert!(
+                !w.diverged(),
+                "{engine} {name}: the physics diverged at t = {:.2} s",
+                w.time()
+            );
         }
     }
 }
