@@ -5,7 +5,7 @@ use std::ops::Range;
 use std::sync::Arc;
 
 use kumi_model::{ActuatorMode, RobotModel};
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::actuator::apply_increments;
 use crate::config::SimConfig;
@@ -96,9 +96,9 @@ pub trait SimWorld: Send {
     /// Simulated time since the last reset [s].
     fn time(&self) -> f64;
 
-    /// A configuration with the base at (`x`, `y`) [m] and heading `yaw` [rad], lifted so that
-    /// the lowest collider just touches the ground (fixed-base robots: base at the origin).
-    fn standing_state(&self, x: f64, y: f64, yaw: f64, joint_positions: Vec<f64>) -> RobotState;
+    /// The lowest point [m] of any robot collider with the robot placed at `base_pose_w` and
+    /// `joint_positions` (one per actuator), computed without moving the robot.
+    fn lowest_point(&self, base_pose_w: &Isometry3<f64>, joint_positions: &[f64]) -> f64;
     /// Places the robot at `state`, at rest, with every servo holding that configuration and
     /// every wheel braked; clears contacts and time. A reset world follows the same trajectory
     /// as a freshly built one.
@@ -151,6 +151,24 @@ pub trait SimWorld: Send {
     /// The actuator index range of a module.
     fn module_range(&self, module: &str) -> Result<Range<usize>, SimError> {
         self.servos().module_range(module)
+    }
+
+    /// A configuration with the base at (`x`, `y`) [m] and heading `yaw` [rad], lifted so that
+    /// the lowest collider just touches the ground (fixed-base robots: base at the origin).
+    fn standing_state(&self, x: f64, y: f64, yaw: f64, joint_positions: Vec<f64>) -> RobotState {
+        let level = Isometry3::from_parts(
+            Translation3::new(x, y, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
+        );
+        let lift = if self.model().fixed_base {
+            0.0
+        } else {
+            -self.lowest_point(&level, &joint_positions)
+        };
+        RobotState {
+            base_pose_w: Translation3::new(0.0, 0.0, lift) * level,
+            joint_positions,
+        }
     }
 
     /// The home configuration, standing on the ground at the world origin.

@@ -10,7 +10,7 @@ use kumi_model::kinematics::KinematicTree;
 use kumi_model::RobotModel;
 use mujoco_rs::prelude::*;
 use mujoco_rs::wrappers::MjtWarning;
-use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Translation3, Vector3};
 
 use crate::geometry::{lowest_z, GeomShape};
 use crate::mjcf::{self, quat_wxyz, GROUND_GEOM};
@@ -261,43 +261,31 @@ impl SimWorld for MujocoWorld {
         self.time_s
     }
 
-    fn standing_state(&self, x: f64, y: f64, yaw: f64, joint_positions: Vec<f64>) -> RobotState {
-        let level = Isometry3::from_parts(
-            Translation3::new(x, y, 0.0),
-            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
-        );
-        let lift = if self.model.fixed_base {
-            0.0
-        } else {
-            let poses = self
-                .tree
-                .forward(&level, &self.tree_positions(&joint_positions));
-            let mj = self.data.model();
-            let mut lowest = f64::INFINITY;
-            for &(g, shape) in &self.geoms {
-                let body = mj.geom_bodyid()[g] as usize;
-                let Some(link) = self.body_links[body].as_deref() else {
-                    continue;
-                };
-                let link_pose = poses[self.tree.link_index(link).expect("same URDF")];
-                let p = mj.geom_pos()[g];
-                let local = Isometry3::from_parts(
-                    Translation3::new(p[0], p[1], p[2]),
-                    quat_wxyz(&mj.geom_quat()[g]),
-                );
-                let pose = link_pose * local;
-                lowest = lowest.min(lowest_z(
-                    shape,
-                    &pose.translation.vector,
-                    pose.rotation.to_rotation_matrix().matrix(),
-                ));
-            }
-            -lowest
-        };
-        RobotState {
-            base_pose_w: Translation3::new(0.0, 0.0, lift) * level,
-            joint_positions,
+    fn lowest_point(&self, base_pose_w: &Isometry3<f64>, joint_positions: &[f64]) -> f64 {
+        let poses = self
+            .tree
+            .forward(base_pose_w, &self.tree_positions(joint_positions));
+        let mj = self.data.model();
+        let mut lowest = f64::INFINITY;
+        for &(g, shape) in &self.geoms {
+            let body = mj.geom_bodyid()[g] as usize;
+            let Some(link) = self.body_links[body].as_deref() else {
+                continue;
+            };
+            let link_pose = poses[self.tree.link_index(link).expect("same URDF")];
+            let p = mj.geom_pos()[g];
+            let local = Isometry3::from_parts(
+                Translation3::new(p[0], p[1], p[2]),
+                quat_wxyz(&mj.geom_quat()[g]),
+            );
+            let pose = link_pose * local;
+            lowest = lowest.min(lowest_z(
+                shape,
+                &pose.translation.vector,
+                pose.rotation.to_rotation_matrix().matrix(),
+            ));
         }
+        lowest
     }
 
     fn reset(&mut self, state: &RobotState) {

@@ -8,7 +8,7 @@ use kumi_engine::{
 };
 use kumi_model::kinematics::KinematicTree;
 use kumi_model::RobotModel;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Vector3};
 use rapier3d::prelude::*;
 
 use crate::convert::{to_na_isometry, to_na_vector, to_rapier_pose};
@@ -123,27 +123,6 @@ impl World {
         Ok(world)
     }
 
-    /// The lowest point [m] of any robot collider with the robot placed at `base_pose_w`.
-    fn lowest_point(&self, base_pose_w: &Isometry3<f64>, joint_positions: &[f64]) -> f64 {
-        let poses = self
-            .tree
-            .forward(base_pose_w, &self.tree_positions(joint_positions));
-        let mut lowest = f64::INFINITY;
-        for (&handle, &link_index) in &self.collider_links {
-            let collider = &self.physics.colliders[handle];
-            let link_name = &self.model.urdf.links[link_index].name;
-            let tree_index = self.tree.link_index(link_name).expect("same URDF");
-            let local = collider
-                .position_wrt_parent()
-                .copied()
-                .unwrap_or(Pose::IDENTITY);
-            let pose = to_rapier_pose(&poses[tree_index]) * local;
-            let aabb = collider.shape().compute_aabb(&pose);
-            lowest = lowest.min(f64::from(aabb.mins.z));
-        }
-        lowest
-    }
-
     /// Joint positions in the kinematic tree's order from positions in actuator order.
     fn tree_positions(&self, joint_positions: &[f64]) -> Vec<f64> {
         let mut q = vec![0.0; self.tree.joints().len()];
@@ -192,17 +171,24 @@ impl SimWorld for World {
         self.time_s
     }
 
-    fn standing_state(&self, x: f64, y: f64, yaw: f64, joint_positions: Vec<f64>) -> RobotState {
-        let level = Isometry3::from_parts(
-            Translation3::new(x, y, 0.0),
-            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw),
-        );
-        let lowest = self.lowest_point(&level, &joint_positions);
-        let lift = if self.model.fixed_base { 0.0 } else { -lowest };
-        RobotState {
-            base_pose_w: Translation3::new(0.0, 0.0, lift) * level,
-            joint_positions,
+    fn lowest_point(&self, base_pose_w: &Isometry3<f64>, joint_positions: &[f64]) -> f64 {
+        let poses = self
+            .tree
+            .forward(base_pose_w, &self.tree_positions(joint_positions));
+        let mut lowest = f64::INFINITY;
+        for (&handle, &link_index) in &self.collider_links {
+            let collider = &self.physics.colliders[handle];
+            let link_name = &self.model.urdf.links[link_index].name;
+            let tree_index = self.tree.link_index(link_name).expect("same URDF");
+            let local = collider
+                .position_wrt_parent()
+                .copied()
+                .unwrap_or(Pose::IDENTITY);
+            let pose = to_rapier_pose(&poses[tree_index]) * local;
+            let aabb = collider.shape().compute_aabb(&pose);
+            lowest = lowest.min(f64::from(aabb.mins.z));
         }
+        lowest
     }
 
     /// Runs in place, without rebuilding: restores the physics as built, then places the bodies.
