@@ -18,6 +18,8 @@ use crate::sim::{load_model, PhysicsArgs};
 pub enum BenchCommand {
     /// Simulation speed: control steps per second, build and reset time.
     Sim(BenchSimArgs),
+    /// Learner speed: PPO update samples per second and collection steps per second.
+    Learn(crate::bench_learn::BenchLearnArgs),
 }
 
 #[derive(Args, Debug)]
@@ -202,7 +204,10 @@ fn bench_model(
 }
 
 pub fn run(what: BenchCommand) -> Result<()> {
-    let BenchCommand::Sim(args) = what;
+    let args = match what {
+        BenchCommand::Sim(args) => args,
+        BenchCommand::Learn(args) => return crate::bench_learn::run(args),
+    };
     if !(args.seconds.is_finite() && args.seconds > 0.0) {
         bail!("--seconds must be positive, got {}", args.seconds);
     }

@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
+use kumi_policies::goals::GoalDistribution;
 use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy};
 use kumi_train::arm_reach::ArmReachConfig;
@@ -37,7 +38,16 @@ pub struct EvalArmArgs {
     /// Physics engines to evaluate in, one report each (e.g. `rapier,mujoco`; default rapier).
     #[arg(long, value_delimiter = ',', value_parser = crate::engine::parse)]
     pub engine: Vec<kumi_worlds::Engine>,
-    /// Print one JSON object instead of a markdown table.
+    /// Goal distributions, one report each: `paper` (the paper's box, section IV-A) and
+    /// `working` (tool poses around the home configurations of every arm module of the
+    /// robots named in the training config's `[goals]`).
+    #[arg(long, value_delimiter = ',', default_value = "paper", value_parser = ["paper", "working"])]
+    pub goals: Vec<String>,
+    /// The training config whose `[goals]` define the working poses (default: the shipped one).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Print one JSON object instead of a markdown table (an array for several engines or
+    /// goal sets).
     #[arg(long)]
     pub json: bool,
 }
@@ -84,10 +94,15 @@ pub fn run(what: EvalCommand) -> Result<()> {
     for &engine in &engines {
         crate::engine::choose(Some(engine), engine)?;
     }
+    let goal_config = crate::train::read_config(args.config.as_deref())?.goals;
+    let working = goal_config.resolve()?.working_only();
     let mut results = Vec::new();
-    for &engine in &engines {
+    for (engine, goals) in engines
+        .iter()
+        .flat_map(|e| args.goals.iter().map(move |g| (*e, g)))
+    {
         eprintln!(
-            "evaluating {} ({backend} backend, {engine} engine) over {} goals",
+            "evaluating {} ({backend} backend, {engine} engine) over {} {goals} goals",
             path.display(),
             args.rollouts
         );
@@ -96,6 +111,11 @@ pub fn run(what: EvalCommand) -> Result<()> {
             model.clone(),
             ArmReachConfig {
                 engine,
+                goals: if goals == "working" {
+                    working.clone()
+                } else {
+                    GoalDistribution::paper()
+                },
                 ..ArmReachConfig::default()
             },
             args.rollouts,
@@ -118,10 +138,13 @@ pub fn run(what: EvalCommand) -> Result<()> {
         }
     } else {
         print!("# Arm-reach skill: evaluation\n\n{provenance}");
+        if args.goals.iter().any(|g| g == "working") {
+            print!("\n{}", working_table(&goal_config, &model)?);
+        }
         for result in &results {
             print!("\n{}", result.markdown());
         }
-        if let [a, b] = results.as_slice() {
+        if let ([a, b], [_]) = (results.as_slice(), args.goals.as_slice()) {
             println!(
                 "\nBetween the engines ({} minus {}): mean position error {:+.4} m, mean orientation error {:+.4} rad.",
                 b.engine,
@@ -132,4 +155,36 @@ pub fn run(what: EvalCommand) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Where each arm module of the training config's robots holds its tool at home, against the
+/// paper's goal box: the centres of the working-pose goals.
+fn working_table(
+    goals: &kumi_train::arm_reach::GoalConfig,
+    arm: &kumi_model::RobotModel,
+) -> Result<String> {
+    let fk = kumi_policies::kinematics::ToolKinematics::new(arm, &arm.modules[0])
+        .map_err(anyhow::Error::msg)?;
+    let paper = kumi_policies::goal::GoalRange::default();
+    let mut out = format!(
+        "Working goals: the tool pose at joint angles within +-{} rad of one arm module's home (`[goals]` of the training config). Home tool poses in each module's base frame:\n\n| module | position [m] | roll, pitch, yaw [rad] | in the paper's box |\n|---|---|---|---|\n",
+        goals.spread_rad
+    );
+    for (name, home) in goals.working_configurations()? {
+        let pose = fk.tool_pose_b(&home);
+        let p = pose.translation.vector;
+        let (roll, pitch, yaw) = pose.rotation.euler_angles();
+        let inside = (0..3).all(|i| p[i] >= paper.position_min[i] && p[i] <= paper.position_max[i])
+            && pitch >= paper.pitch.0
+            && pitch <= paper.pitch.1
+            && yaw.abs() < 1e-6;
+        out += &format!(
+            "| {name} | ({:.3}, {:.3}, {:.3}) | ({roll:.2}, {pitch:.2}, {yaw:.2}) | {} |\n",
+            p.x,
+            p.y,
+            p.z,
+            if inside { "yes" } else { "no" }
+        );
+    }
+    Ok(out)
 }

@@ -2,6 +2,7 @@
 
 mod arm;
 mod bench;
+mod bench_learn;
 mod bridge;
 mod engine;
 mod eval;

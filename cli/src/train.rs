@@ -7,16 +7,33 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use kumi_train::arm_reach::{ArmReach, ArmReachConfig};
+use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig};
 use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
 use kumi_train::reward::ReachWeights;
 
-/// The training config file: PPO hyperparameters and the reward's weights.
+/// The training config file: PPO hyperparameters, the reward's weights and the goals.
 #[derive(Debug, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
-struct TrainArmConfig {
-    ppo: PpoConfig,
-    reward: ReachWeights,
+pub struct TrainArmConfig {
+    pub ppo: PpoConfig,
+    pub reward: ReachWeights,
+    pub goals: GoalConfig,
+}
+
+/// The config at `path`, or the shipped one.
+pub fn read_config(path: Option<&std::path::Path>) -> Result<TrainArmConfig> {
+    let text = match path {
+        Some(path) => {
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?
+        }
+        None => SHIPPED_CONFIG.to_string(),
+    };
+    toml::from_str(&text).with_context(|| {
+        format!(
+            "parsing {}",
+            path.map_or("the shipped config".into(), |p| p.display().to_string())
+        )
+    })
 }
 
 use crate::sim::load_model;
@@ -44,8 +61,11 @@ pub struct TrainArmArgs {
     /// Physics engine (default: mujoco when this build has it, else rapier).
     #[arg(long, value_parser = crate::engine::parse)]
     pub engine: Option<kumi_worlds::Engine>,
-    /// Continue from a checkpoint directory (parameters, observation statistics, step count;
-    /// Adam's moments restart).
+    /// Threads for collection and update (default: every core). Results do not depend on it.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Continue from a checkpoint directory (parameters, Adam's moments, observation
+    /// statistics, step count).
     #[arg(long)]
     pub resume: Option<PathBuf>,
 }
@@ -103,20 +123,8 @@ fn row(s: &IterationStats, wall_s: f64) -> String {
 
 pub fn run(what: TrainCommand) -> Result<()> {
     let TrainCommand::Arm(args) = what;
-    let text = match &args.config {
-        Some(path) => {
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?
-        }
-        None => SHIPPED_CONFIG.to_string(),
-    };
-    let file: TrainArmConfig = toml::from_str(&text).with_context(|| {
-        format!(
-            "parsing {}",
-            args.config
-                .as_ref()
-                .map_or("the shipped config".into(), |p| p.display().to_string())
-        )
-    })?;
+    let file = read_config(args.config.as_deref())?;
+    let goals = file.goals.resolve()?;
     let mut config = file.ppo;
     if let Some(s) = args.steps {
         config.total_steps = s;
@@ -124,17 +132,27 @@ pub fn run(what: TrainCommand) -> Result<()> {
     if let Some(s) = args.seed {
         config.seed = s;
     }
-    if config.num_envs == 0
-        || config.rollout_steps == 0
-        || config.minibatches == 0
-        || config.epochs == 0
-    {
-        bail!("num_envs, rollout_steps, epochs and minibatches must be positive");
+    config
+        .check()
+        .map_err(|e| anyhow::anyhow!("invalid [ppo] config: {e}"))?;
+    if let Some(threads) = args.threads {
+        if threads == 0 {
+            bail!("--threads must be positive");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build_global()
+            .context("setting the number of threads")?;
     }
+    eprintln!(
+        "{} threads (a seeded run gives the same bits on any number)",
+        rayon::current_num_threads()
+    );
     // What is trained, overrides included: its fingerprint goes into the policy's metadata.
     let trained = TrainArmConfig {
         ppo: config.clone(),
         reward: file.reward,
+        goals: file.goals.clone(),
     };
     let model = load_model("arm")?;
     let engine = crate::engine::choose(args.engine, kumi_worlds::default_training_engine())?;
@@ -156,6 +174,7 @@ pub fn run(what: TrainCommand) -> Result<()> {
                 ArmReachConfig {
                     engine,
                     weights: file.reward,
+                    goals: goals.clone(),
                     ..ArmReachConfig::default()
                 },
                 config.seed.wrapping_mul(1000).wrapping_add(i as u64),
@@ -194,7 +213,7 @@ pub fn run(what: TrainCommand) -> Result<()> {
     );
     bar.set_position(trainer.env_steps);
     while trainer.env_steps < total {
-        let s = trainer.iterate()?;
+        let s = trainer.iterate();
         let wall = start.elapsed().as_secs_f64();
         writeln!(csv, "{}", row(&s, wall))?;
         let status = format!(
@@ -236,8 +255,11 @@ pub fn run(what: TrainCommand) -> Result<()> {
         &kumi_policies::metadata::fingerprint(&serde_json::to_string(&trained)?),
         trainer.env_steps,
     );
-    let onnx =
-        kumi_train::export::actor_model(&trainer.norm, &trainer.net.actor.parameters()?, &metadata);
+    let onnx = kumi_train::export::actor_model(
+        &trainer.norm,
+        &trainer.learner.net.actor.parameters(),
+        &metadata,
+    );
     let onnx_path = args.out.join("arm_reach.onnx");
     std::fs::write(&onnx_path, kumi_train::export::encode(&onnx))
         .with_context(|| format!("writing {}", onnx_path.display()))?;

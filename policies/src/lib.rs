@@ -10,6 +10,8 @@
 //! - [`rotation`]: the orientation error (the quaternion log map).
 
 pub mod goal;
+pub mod goals;
+pub mod kinematics;
 pub mod metadata;
 pub mod observation;
 pub mod rotation;

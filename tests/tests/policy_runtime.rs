@@ -4,7 +4,6 @@
 use std::collections::BTreeMap;
 use std::sync::Once;
 
-use candle_core::{Device, Tensor};
 use kumi_policies::metadata;
 use kumi_policies::observation::OBSERVATION_DIM;
 use kumi_policies::skill::ArmSkill;
@@ -23,9 +22,9 @@ fn arm_skill(control_hz: f64) -> ArmSkill {
 fn random_policy(
     obs_dim: usize,
     metadata: &BTreeMap<String, String>,
-) -> (Mlp, RunningNorm, Vec<u8>) {
+) -> (Mlp<f32>, RunningNorm, Vec<u8>) {
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let net = Mlp::new(&[obs_dim, 64, 32, 7], 1.0, &mut rng, &Device::Cpu).unwrap();
+    let net = Mlp::new(&[obs_dim, 64, 32, 7], 1.0, &mut rng);
     let mut norm = RunningNorm::new(obs_dim);
     let rows: Vec<Vec<f32>> = (0..200)
         .map(|_| {
@@ -35,7 +34,7 @@ fn random_policy(
         })
         .collect();
     norm.update(&rows.iter().map(|r| r.as_slice()).collect::<Vec<_>>());
-    let bytes = encode(&actor_model(&norm, &net.parameters().unwrap(), metadata));
+    let bytes = encode(&actor_model(&norm, &net.parameters(), metadata));
     (net, norm, bytes)
 }
 
@@ -64,15 +63,7 @@ fn both_backends_reproduce_the_training_network() {
         for _ in 0..20 {
             let obs: [f32; OBSERVATION_DIM] = std::array::from_fn(|_| rng.random_range(-3.0..3.0));
             let got = policy.act(&obs).unwrap();
-            let input =
-                Tensor::from_vec(norm.apply(&obs), (1, OBSERVATION_DIM), &Device::Cpu).unwrap();
-            let want: Vec<f32> = net
-                .forward(&input)
-                .unwrap()
-                .flatten_all()
-                .unwrap()
-                .to_vec1()
-                .unwrap();
+            let want = net.forward(&norm.apply(&obs), 1);
             for (g, w) in got.iter().zip(&want) {
                 assert!((g - w).abs() <= 1e-5, "{choice:?}: {g} vs {w}");
             }

@@ -5,7 +5,9 @@
 use std::sync::Arc;
 
 use kumi_model::{Actuator, ActuatorMode, RobotModel};
-use kumi_policies::goal::{GoalNoise, GoalRange};
+use kumi_policies::goal::GoalNoise;
+use kumi_policies::goals::GoalDistribution;
+use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::rotation::orientation_error;
 use kumi_policies::skill::{ArmSkill, SkillError};
@@ -17,7 +19,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::reward::{reach_terms, ReachTerms, ReachWeights};
 
 /// Episode and task settings. Defaults are the paper's (section IV-A) and kumi's reward weights.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ArmReachConfig {
     /// The physics engine the arm is simulated in.
     pub engine: Engine,
@@ -27,7 +29,7 @@ pub struct ArmReachConfig {
     pub goal_period_steps: usize,
     /// Initial joint angles are uniform in [-r, r] [rad].
     pub initial_joint_range: f64,
-    pub goals: GoalRange,
+    pub goals: GoalDistribution,
     pub goal_noise: GoalNoise,
     pub weights: ReachWeights,
 }
@@ -39,7 +41,7 @@ impl Default for ArmReachConfig {
             episode_steps: 360,
             goal_period_steps: 120,
             initial_joint_range: 0.5,
-            goals: GoalRange::default(),
+            goals: GoalDistribution::paper(),
             goal_noise: GoalNoise {
                 position_std: 0.005,
                 orientation_std: 0.01,
@@ -57,6 +59,74 @@ pub enum EnvError {
     Skill(#[from] SkillError),
     #[error("the arm-reach environment needs a fixed-base robot with one 7-joint arm module and a tool frame; `{0}` is not one")]
     NotASingleArm(String),
+    #[error("kinematics: {0}")]
+    Kinematics(String),
+    #[error("goal distribution: {0}")]
+    Goals(String),
+}
+
+/// The goal distribution as a config file states it (`[goals]` in
+/// `train/configs/arm_reach.toml`).
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct GoalConfig {
+    /// Probability of a goal from the paper's box; the others are working poses.
+    pub paper_box_weight: f64,
+    /// Half-width [rad] of the joint-angle spread around each working configuration.
+    pub spread_rad: f64,
+    /// Morphologies (shipped names or files) whose arm modules' home angles are the working
+    /// configurations.
+    pub working_configurations: Vec<String>,
+}
+
+impl GoalConfig {
+    /// Every arm module of the listed morphologies (seven position joints) as
+    /// (`robot/module`, home joint angles [rad]), in file order.
+    pub fn working_configurations(&self) -> Result<Vec<(String, [f64; JOINTS])>, EnvError> {
+        let library = kumi_model::ModuleLibrary::shipped();
+        let mut found = Vec::new();
+        for name in &self.working_configurations {
+            let morphology = kumi_model::load_morphology(name, &library)
+                .map_err(|e| EnvError::Goals(format!("{name}: {e}")))?;
+            let model = kumi_model::assemble(&morphology, &library);
+            for module in &model.modules {
+                if module.position_joints().count() == JOINTS && module.home.len() == JOINTS {
+                    let home = std::array::from_fn(|j| module.home[j]);
+                    found.push((format!("{}/{}", model.name, module.name), home));
+                }
+            }
+        }
+        Ok(found)
+    }
+
+    /// The distribution, the working configurations' duplicates removed.
+    pub fn resolve(&self) -> Result<GoalDistribution, EnvError> {
+        if !(0.0..=1.0).contains(&self.paper_box_weight)
+            || self.spread_rad.is_nan()
+            || self.spread_rad < 0.0
+        {
+            return Err(EnvError::Goals(
+                "paper_box_weight must lie in [0, 1] and spread_rad be >= 0".into(),
+            ));
+        }
+        let mut centres: Vec<[f64; JOINTS]> = Vec::new();
+        for (_, home) in self.working_configurations()? {
+            if !centres.contains(&home) {
+                centres.push(home);
+            }
+        }
+        if centres.is_empty() && self.paper_box_weight < 1.0 {
+            return Err(EnvError::Goals(
+                "working poses asked for, but no arm module found in working_configurations".into(),
+            ));
+        }
+        Ok(GoalDistribution {
+            paper_box_weight: self.paper_box_weight,
+            centres,
+            spread_rad: self.spread_rad,
+            ..GoalDistribution::paper()
+        })
+    }
 }
 
 /// What one step produced.
@@ -82,6 +152,9 @@ pub struct ArmReach {
     ee_link: String,
     base_link: String,
     actuators: Vec<Actuator>,
+    /// Forward kinematics and joint limits, for working-pose goals.
+    kinematics: ToolKinematics,
+    limits: [(f64, f64); JOINTS],
     skill: ArmSkill,
     config: ArmReachConfig,
     rng: ChaCha8Rng,
@@ -114,6 +187,8 @@ impl ArmReach {
             return Err(not_arm());
         }
         let ee_link = arm.ee_link.clone().ok_or_else(not_arm)?;
+        let kinematics = ToolKinematics::new(&model, arm).map_err(EnvError::Kinematics)?;
+        let limits = std::array::from_fn(|j| (actuators[j].lower, actuators[j].upper));
         let sim = SimConfig::for_model(&model);
         let skill = ArmSkill::new(arm, sim.control_hz)?;
         let world = kumi_worlds::build(config.engine, model.clone(), sim)?;
@@ -126,6 +201,8 @@ impl ArmReach {
             base_link: arm.root_link.clone(),
             ee_link,
             actuators,
+            kinematics,
+            limits,
             skill,
             world,
             config,
@@ -161,9 +238,16 @@ impl ArmReach {
         self.targets = q;
         self.previous_action = [0.0; JOINTS];
         self.step = 0;
-        self.goal = self.config.goals.sample(&mut self.rng);
+        self.goal = self.sample_goal();
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
         self.observation()
+    }
+
+    fn sample_goal(&mut self) -> Goal {
+        let kinematics = &self.kinematics;
+        self.config
+            .goals
+            .sample(&mut self.rng, &self.limits, &|q| kinematics.tool_pose_b(q))
     }
 
     /// The tool pose in the arm base frame.
@@ -248,7 +332,7 @@ impl ArmReach {
 
         let goal_ended = self.step.is_multiple_of(self.config.goal_period_steps);
         if goal_ended {
-            self.goal = self.config.goals.sample(&mut self.rng);
+            self.goal = self.sample_goal();
         }
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
         StepOutcome {

@@ -62,6 +62,9 @@ impl ErrorStats {
 pub struct Evaluation {
     /// The physics engine the rollouts ran in.
     pub engine: String,
+    /// The goal distribution: "paper" (the paper's box) or "working" (working poses).
+    #[serde(default)]
+    pub goals: String,
     pub rollouts: usize,
     pub position_error_m: ErrorStats,
     pub orientation_error_rad: ErrorStats,
@@ -77,8 +80,9 @@ impl Evaluation {
             )
         };
         format!(
-            "| final error ({} rollouts, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}",
+            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}",
             self.rollouts,
+            self.goals,
             self.engine,
             row("position [m]", &self.position_error_m),
             row("orientation [rad]", &self.orientation_error_rad),
@@ -118,7 +122,7 @@ where
                     .as_mut()
                     .map_err(|e| EvalError::Policy(e.to_string()))?;
                 let episode_seed = seed.wrapping_mul(1_000_003).wrapping_add(k as u64);
-                let mut env = ArmReach::new(model.clone(), config, episode_seed)?;
+                let mut env = ArmReach::new(model.clone(), config.clone(), episode_seed)?;
                 let mut obs = env.reset();
                 let mut ends = Vec::with_capacity(goals_per_episode);
                 for _ in 0..config.episode_steps {
@@ -137,6 +141,13 @@ where
     let (p, o): (Vec<f64>, Vec<f64>) = ends.iter().copied().unzip();
     Ok(Evaluation {
         engine: config.engine.to_string(),
+        goals: if config.goals.centres.is_empty() || config.goals.paper_box_weight >= 1.0 {
+            "paper".into()
+        } else if config.goals.paper_box_weight <= 0.0 {
+            "working".into()
+        } else {
+            "mixed".into()
+        },
         rollouts: ends.len(),
         position_error_m: ErrorStats::of(&p),
         orientation_error_rad: ErrorStats::of(&o),
@@ -165,6 +176,7 @@ mod tests {
     fn json_has_the_documented_shape() {
         let e = Evaluation {
             engine: "rapier".into(),
+            goals: "paper".into(),
             rollouts: 2,
             position_error_m: ErrorStats::of(&[0.1, 0.3]),
             orientation_error_rad: ErrorStats::of(&[0.5, 0.5]),

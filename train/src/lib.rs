@@ -8,5 +8,6 @@ pub mod arm_reach;
 pub mod env;
 pub mod evaluate;
 pub mod export;
+pub mod nn;
 pub mod ppo;
 pub mod reward;

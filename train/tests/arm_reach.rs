@@ -132,3 +132,62 @@ fn the_observation_is_the_world_state_and_the_noisy_goal() {
     assert!((p - (tool.translation.vector - e.goal().position_b).norm()).abs() < 1e-12);
     assert!(r >= 0.0);
 }
+
+#[test]
+fn working_poses_are_the_home_tool_poses_of_every_shipped_arm_module() {
+    use kumi_policies::kinematics::ToolKinematics;
+    use kumi_train::arm_reach::GoalConfig;
+    let config = |spread_rad| GoalConfig {
+        paper_box_weight: 0.0,
+        spread_rad,
+        working_configurations: vec!["minimal".into(), "dragon".into(), "tricycle".into()],
+    };
+    let goals = config(0.0).resolve().unwrap();
+    // The manipulators of the three robots share one home; Dragon's second arm stands straight;
+    // Tricycle's three legs differ in their last joint: five distinct configurations.
+    assert_eq!(goals.centres.len(), 5, "{:?}", goals.centres);
+    // With no spread, a working goal is exactly one module's home tool pose, by the arm's own
+    // kinematics; a Tricycle leg's tool stands at about (0.85, 0, 0.76) m, outside the paper's box.
+    let arm = model("arm");
+    let fk = ToolKinematics::new(&arm, &arm.modules[0]).unwrap();
+    let leg = fk.tool_pose_b(&goals.centres[2]).translation.vector;
+    assert!(
+        (leg - nalgebra::Vector3::new(0.85, 0.0, 0.76)).norm() < 0.05,
+        "leg tool at home: {leg:?}"
+    );
+    let mut e = ArmReach::new(
+        arm.clone(),
+        ArmReachConfig {
+            goals: goals.clone(),
+            ..ArmReachConfig::default()
+        },
+        3,
+    )
+    .unwrap();
+    for _ in 0..20 {
+        e.reset();
+        let g = e.goal().position_b;
+        assert!(
+            goals
+                .centres
+                .iter()
+                .any(|q| (fk.tool_pose_b(q).translation.vector - g).norm() < 1e-9),
+            "goal {g:?} is not a home tool pose"
+        );
+    }
+    // Bad settings and unknown robots are refused with a message.
+    let mut bad = config(0.5);
+    bad.paper_box_weight = 1.5;
+    assert!(bad
+        .resolve()
+        .unwrap_err()
+        .to_string()
+        .contains("paper_box_weight"));
+    let mut unknown = config(0.5);
+    unknown.working_configurations = vec!["no-such-robot".into()];
+    assert!(unknown
+        .resolve()
+        .unwrap_err()
+        .to_string()
+        .contains("no-such-robot"));
+}

@@ -9,13 +9,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use kumi_model::kinematics::KinematicTree;
 use kumi_model::{Actuator, RobotModel};
 use kumi_msgs::builtin_interfaces::Time;
 use kumi_msgs::geometry_msgs::PoseStamped;
 use kumi_msgs::rosgraph_msgs::Clock;
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_msgs::std_msgs::{Float64MultiArray, Header};
+use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::JOINTS;
 use kumi_policies::skill::{ArmSkill, SkillError};
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode};
@@ -81,45 +81,6 @@ pub enum ArmNodeError {
     Kinematics(String),
 }
 
-/// The module's forward kinematics: tool pose in the module's base frame from its joints.
-struct ToolKinematics {
-    tree: KinematicTree,
-    joints: Vec<String>,
-    base: usize,
-    tool: usize,
-}
-
-impl ToolKinematics {
-    fn new(model: &RobotModel, module: &kumi_model::ModuleInstance) -> Result<Self, ArmNodeError> {
-        let tree =
-            KinematicTree::new(&model.urdf).map_err(|e| ArmNodeError::Kinematics(e.to_string()))?;
-        let link = |name: &str| {
-            tree.link_index(name)
-                .ok_or_else(|| ArmNodeError::Kinematics(format!("no link `{name}`")))
-        };
-        let base = link(&module.root_link)?;
-        let tool = link(module.ee_link.as_deref().unwrap_or_default())?;
-        Ok(Self {
-            joints: module.position_joints().map(|a| a.joint.clone()).collect(),
-            tree,
-            base,
-            tool,
-        })
-    }
-
-    fn tool_pose_b(&self, q: &[f64; JOINTS]) -> Isometry3<f64> {
-        let named = self
-            .joints
-            .iter()
-            .map(String::as_str)
-            .zip(q.iter().copied());
-        let poses = self
-            .tree
-            .forward(&Isometry3::identity(), &self.tree.positions(named));
-        poses[self.base].inverse() * poses[self.tool]
-    }
-}
-
 /// Everything a node needs that is not ROS: checked before any ROS entity is created, so a bad
 /// module, policy or model fails fast with its own message.
 pub struct Prepared {
@@ -154,7 +115,7 @@ impl Prepared {
             config.policy.display(),
             policy.backend()
         );
-        let kinematics = ToolKinematics::new(model, module)?;
+        let kinematics = ToolKinematics::new(model, module).map_err(ArmNodeError::Kinematics)?;
         let reach = kinematics
             .tool_pose_b(&[0.0; JOINTS])
             .translation

@@ -3,8 +3,6 @@
 
 use std::time::Instant;
 
-use candle_core::{Device, Result, Tensor, Var};
-use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -12,9 +10,10 @@ use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 use crate::env::Environment;
+use crate::nn::adam::Adam;
 use crate::ppo::gae::{gae, GaeInput};
-use crate::ppo::loss::{gaussian_log_prob, ppo_loss, LossCoefficients};
-use crate::ppo::network::ActorCritic;
+use crate::ppo::loss::{gaussian_log_prob, Loss, LossCoefficients, Samples};
+use crate::ppo::network::{ActorCritic, Minibatch};
 use crate::ppo::normalizer::RunningNorm;
 
 /// Every PPO hyperparameter. Defaults follow the paper's Table II where it gives one.
@@ -48,6 +47,54 @@ pub struct PpoConfig {
     pub minibatches: usize,
     /// Initial log standard deviation of the policy.
     pub initial_log_std: f32,
+    /// Fraction of `total_steps` after which the learning rate and the entropy coefficient
+    /// fall linearly, reaching `anneal_final` times their values at the end (1: no annealing).
+    #[serde(default = "one")]
+    pub anneal_after: f64,
+    /// What the learning rate and the entropy coefficient are multiplied by at the end.
+    #[serde(default = "one")]
+    pub anneal_final: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl PpoConfig {
+    /// The annealing factor at `env_steps` (1 before `anneal_after`, `anneal_final` at the end).
+    pub fn anneal(&self, env_steps: u64) -> f64 {
+        let progress = env_steps as f64 / self.total_steps.max(1) as f64;
+        if progress <= self.anneal_after || self.anneal_after >= 1.0 {
+            return 1.0;
+        }
+        let t = ((progress - self.anneal_after) / (1.0 - self.anneal_after)).min(1.0);
+        1.0 + (self.anneal_final - 1.0) * t
+    }
+
+    /// Why this config cannot train, if it cannot.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if self.num_envs == 0
+            || self.rollout_steps == 0
+            || self.epochs == 0
+            || self.minibatches == 0
+        {
+            return Err("num_envs, rollout_steps, epochs and minibatches must be positive".into());
+        }
+        if self.minibatches > self.num_envs * self.rollout_steps {
+            return Err(format!(
+                "{} minibatches of a {}-sample rollout leave some empty",
+                self.minibatches,
+                self.num_envs * self.rollout_steps
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.anneal_after)
+            || self.anneal_final.is_nan()
+            || self.anneal_final <= 0.0
+        {
+            return Err("anneal_after must lie in [0, 1] and anneal_final be positive".into());
+        }
+        Ok(())
+    }
 }
 
 impl Default for PpoConfig {
@@ -68,6 +115,8 @@ impl Default for PpoConfig {
             epochs: 5,
             minibatches: 4,
             initial_log_std: -0.5,
+            anneal_after: 1.0,
+            anneal_final: 1.0,
         }
     }
 }
@@ -138,21 +187,67 @@ struct Progress {
     normalizer: RunningNorm,
     /// Adam's learning rate (it adapts when `desired_kl > 0`).
     learning_rate: f64,
+    /// Adam's step count (for its bias correction).
+    #[serde(default)]
+    adam_step: u64,
+}
+
+/// A config that cannot train.
+#[derive(Debug, thiserror::Error)]
+#[error("invalid PPO config: {0}")]
+pub struct ConfigError(pub String);
+
+/// The update half of PPO: the networks, Adam and the minibatch shuffling. Independent of
+/// any environment (`kumi bench learn` times it on synthetic batches).
+pub struct Learner {
+    pub config: PpoConfig,
+    pub net: ActorCritic,
+    pub optimizer: Adam<f32>,
+    rng: ChaCha8Rng,
 }
 
 /// PPO over a set of environments.
 pub struct Trainer<E: Environment> {
-    pub config: PpoConfig,
-    pub net: ActorCritic,
+    pub learner: Learner,
     pub norm: RunningNorm,
     envs: Vec<E>,
     observations: Vec<Vec<f32>>,
     episode_returns: Vec<f64>,
-    optimizer: AdamW,
+    /// Action noise.
     rng: ChaCha8Rng,
-    device: Device,
     pub env_steps: u64,
     pub iteration: usize,
+}
+
+/// What one rollout recorded, row `t * num_envs + i` for step `t` of environment `i`.
+struct Rollout {
+    /// Raw observations and the observations after each step.
+    observations: Vec<Vec<f32>>,
+    next_observations: Vec<Vec<f32>>,
+    /// [rows, A]
+    actions: Vec<f32>,
+    rewards: Vec<f32>,
+    terminated: Vec<bool>,
+    ended: Vec<bool>,
+    episode_returns: Vec<f64>,
+    position_errors: Vec<f64>,
+    orientation_errors: Vec<f64>,
+    seconds: f64,
+}
+
+/// A rollout made ready for the update.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Batch {
+    /// Normalised observations [rows, D].
+    pub observations: Vec<f32>,
+    /// [rows, A]
+    pub actions: Vec<f32>,
+    /// Log-probabilities of the actions under the policy that took them, [rows].
+    pub old_log_prob: Vec<f32>,
+    /// Normalised advantages, [rows].
+    pub advantages: Vec<f32>,
+    /// Value targets, [rows].
+    pub returns: Vec<f32>,
 }
 
 fn mean(xs: &[f64]) -> f64 {
@@ -163,240 +258,289 @@ fn mean(xs: &[f64]) -> f64 {
     }
 }
 
-impl<E: Environment> Trainer<E> {
-    pub fn new(config: PpoConfig, mut envs: Vec<E>) -> Result<Self> {
-        assert!(!envs.is_empty(), "at least one environment");
-        let device = Device::Cpu;
-        let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-        let (obs_dim, act_dim) = (envs[0].observation_dim(), envs[0].action_dim());
+/// (x - mean) / std over the batch (std floored at 1e-8).
+fn standardize(xs: &[f32]) -> Vec<f32> {
+    let n = xs.len() as f32;
+    let m = xs.iter().sum::<f32>() / n;
+    let std = (xs.iter().map(|a| (a - m).powi(2)).sum::<f32>() / n)
+        .sqrt()
+        .max(1e-8);
+    xs.iter().map(|a| (a - m) / std).collect()
+}
+
+/// Copies the rows `indices` of a [rows, width] array.
+fn gather(xs: &[f32], width: usize, indices: &[u32]) -> Vec<f32> {
+    indices
+        .iter()
+        .flat_map(|&i| &xs[i as usize * width..(i as usize + 1) * width])
+        .copied()
+        .collect()
+}
+
+impl Learner {
+    /// Fresh networks for `obs_dim` observations and `act_dim` actions, initialised from the
+    /// seed; the minibatch shuffling draws from its own stream of the same seed.
+    pub fn new(
+        config: PpoConfig,
+        obs_dim: usize,
+        act_dim: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> std::result::Result<Self, ConfigError> {
+        config.check().map_err(ConfigError)?;
         let net = ActorCritic::new(
             obs_dim,
             act_dim,
             &config.hidden,
             config.initial_log_std,
-            &mut rng,
-            &device,
-        )?;
-        let optimizer = AdamW::new(
-            net.vars(),
-            // Plain Adam: candle's AdamW decays weights by default.
-            ParamsAdamW {
-                lr: config.learning_rate,
-                weight_decay: 0.0,
-                ..Default::default()
-            },
-        )?;
+            rng,
+        );
+        let mut shuffle = ChaCha8Rng::seed_from_u64(config.seed);
+        shuffle.set_stream(1);
+        Ok(Self {
+            optimizer: Adam::new(config.learning_rate, &net.group_sizes()),
+            net,
+            rng: shuffle,
+            config,
+        })
+    }
+
+    /// Epochs of shuffled minibatch steps; returns the mean loss parts.
+    pub fn update(&mut self, data: &Batch, env_steps: u64) -> Loss {
+        let (d, a) = (self.net.actor.inputs(), self.net.log_std.len());
+        let total = data.returns.len();
+        let anneal = self.config.anneal(env_steps);
+        let coefficients = LossCoefficients {
+            clip: self.config.clip,
+            value: self.config.value_coef,
+            entropy: self.config.entropy_coef * anneal,
+        };
+        if self.config.desired_kl <= 0.0 {
+            self.optimizer.learning_rate = self.config.learning_rate * anneal;
+        }
+        let minibatch = total.div_ceil(self.config.minibatches);
+        let mut indices: Vec<u32> = (0..total as u32).collect();
+        let (mut sum, mut count) = (Loss::default(), 0.0);
+        for _ in 0..self.config.epochs {
+            indices.shuffle(&mut self.rng);
+            for chunk in indices.chunks(minibatch) {
+                let (observations, actions) = (
+                    gather(&data.observations, d, chunk),
+                    gather(&data.actions, a, chunk),
+                );
+                let (old_log_prob, advantages, returns) = (
+                    gather(&data.old_log_prob, 1, chunk),
+                    gather(&data.advantages, 1, chunk),
+                    gather(&data.returns, 1, chunk),
+                );
+                let batch = Minibatch {
+                    observations: &observations,
+                    samples: Samples {
+                        actions: &actions,
+                        old_log_prob: &old_log_prob,
+                        advantages: &advantages,
+                        returns: &returns,
+                    },
+                };
+                let (loss, gradient) = self.net.loss_and_gradient(&batch, &coefficients);
+                self.optimizer
+                    .update(&mut self.net.groups_mut(), &gradient.groups());
+                if self.config.desired_kl > 0.0 {
+                    self.optimizer.learning_rate = adapt_learning_rate(
+                        self.optimizer.learning_rate,
+                        loss.approx_kl,
+                        self.config.desired_kl,
+                    );
+                }
+                sum.policy += loss.policy;
+                sum.value += loss.value;
+                sum.entropy += loss.entropy;
+                sum.approx_kl += loss.approx_kl;
+                sum.clip_fraction += loss.clip_fraction;
+                count += 1.0;
+            }
+        }
+        Loss {
+            total: f64::NAN,
+            policy: sum.policy / count,
+            value: sum.value / count,
+            entropy: sum.entropy / count,
+            approx_kl: sum.approx_kl / count,
+            clip_fraction: sum.clip_fraction / count,
+        }
+    }
+}
+
+impl<E: Environment> Trainer<E> {
+    pub fn new(config: PpoConfig, mut envs: Vec<E>) -> std::result::Result<Self, ConfigError> {
+        if envs.is_empty() {
+            return Err(ConfigError("no environments".into()));
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+        let (obs_dim, act_dim) = (envs[0].observation_dim(), envs[0].action_dim());
+        let learner = Learner::new(config, obs_dim, act_dim, &mut rng)?;
         let observations = envs.iter_mut().map(|e| e.reset()).collect();
         Ok(Self {
             norm: RunningNorm::new(obs_dim),
             episode_returns: vec![0.0; envs.len()],
             envs,
             observations,
-            net,
-            optimizer,
+            learner,
             rng,
-            device,
-            config,
             env_steps: 0,
             iteration: 0,
         })
     }
 
-    fn normalized(&self, rows: &[Vec<f32>]) -> Result<Tensor> {
-        let dim = self.norm.mean.len();
-        let flat: Vec<f32> = rows.iter().flat_map(|r| self.norm.apply(r)).collect();
-        Tensor::from_vec(flat, (rows.len(), dim), &self.device)
+    pub fn config(&self) -> &PpoConfig {
+        &self.learner.config
     }
 
-    /// One iteration: a rollout, then the update. Returns its statistics.
-    pub fn iterate(&mut self) -> Result<IterationStats> {
-        let n = self.envs.len();
-        let steps = self.config.rollout_steps;
-        let act_dim = self.envs[0].action_dim();
-        let log_std: Vec<f32> = self.net.log_std.as_tensor().to_vec1()?;
+    pub fn net(&self) -> &ActorCritic {
+        &self.learner.net
+    }
 
-        let (mut obs_rows, mut next_rows) =
-            (Vec::with_capacity(n * steps), Vec::with_capacity(n * steps));
-        let mut actions = Vec::with_capacity(n * steps * act_dim);
-        let (mut rewards, mut terminated, mut ended) = (Vec::new(), Vec::new(), Vec::new());
-        let (mut returns_done, mut position_errors, mut orientation_errors) =
-            (Vec::new(), Vec::new(), Vec::new());
-        let collect_start = Instant::now();
+    /// Normalised observations, [rows, D].
+    fn normalized(&self, rows: &[Vec<f32>]) -> Vec<f32> {
+        rows.iter().flat_map(|r| self.norm.apply(r)).collect()
+    }
+
+    /// Steps every environment `rollout_steps` times with actions sampled from the policy.
+    fn collect(&mut self) -> Rollout {
+        let (n, steps) = (self.envs.len(), self.learner.config.rollout_steps);
+        let std: Vec<f32> = self.learner.net.log_std.iter().map(|l| l.exp()).collect();
+        let mut r = Rollout {
+            observations: Vec::with_capacity(n * steps),
+            next_observations: Vec::with_capacity(n * steps),
+            actions: Vec::with_capacity(n * steps * std.len()),
+            rewards: Vec::with_capacity(n * steps),
+            terminated: Vec::with_capacity(n * steps),
+            ended: Vec::with_capacity(n * steps),
+            episode_returns: Vec::new(),
+            position_errors: Vec::new(),
+            orientation_errors: Vec::new(),
+            seconds: 0.0,
+        };
+        let start = Instant::now();
         for _ in 0..steps {
-            let obs = self.normalized(&self.observations)?;
-            let mean: Vec<Vec<f32>> = self.net.actor.forward(&obs)?.to_vec2()?;
-            let step_actions: Vec<Vec<f32>> = mean
-                .iter()
-                .map(|m| {
-                    m.iter()
-                        .zip(&log_std)
-                        .map(|(mu, ls)| {
-                            let z: f64 = StandardNormal.sample(&mut self.rng);
-                            mu + ls.exp() * z as f32
-                        })
-                        .collect()
-                })
-                .collect();
+            let mut actions = self.learner.net.mean(&self.normalized(&self.observations));
+            for (k, a) in actions.iter_mut().enumerate() {
+                let z: f64 = StandardNormal.sample(&mut self.rng);
+                *a += std[k % std.len()] * z as f32;
+            }
             let transitions: Vec<_> = self
                 .envs
                 .par_iter_mut()
-                .zip(&step_actions)
+                .zip(actions.par_chunks(std.len()))
                 .map(|(env, a)| env.step(a))
                 .collect();
+            r.actions.extend_from_slice(&actions);
             for (i, tr) in transitions.into_iter().enumerate() {
-                obs_rows.push(self.observations[i].clone());
-                next_rows.push(tr.observation.clone());
-                actions.extend_from_slice(&step_actions[i]);
-                rewards.push(tr.reward as f32);
-                terminated.push(tr.terminated);
-                ended.push(tr.terminated || tr.truncated);
+                r.rewards.push(tr.reward as f32);
+                r.terminated.push(tr.terminated);
+                r.ended.push(tr.terminated || tr.truncated);
                 self.episode_returns[i] += tr.reward;
                 if let Some((p, o)) = tr.goal_errors {
-                    position_errors.push(p);
-                    orientation_errors.push(o);
+                    r.position_errors.push(p);
+                    r.orientation_errors.push(o);
                 }
-                if tr.terminated || tr.truncated {
-                    returns_done.push(std::mem::take(&mut self.episode_returns[i]));
-                    self.observations[i] = self.envs[i].reset();
+                let next = if tr.terminated || tr.truncated {
+                    r.episode_returns
+                        .push(std::mem::take(&mut self.episode_returns[i]));
+                    self.envs[i].reset()
                 } else {
-                    self.observations[i] = tr.observation;
-                }
+                    tr.observation.clone()
+                };
+                r.next_observations.push(tr.observation);
+                r.observations
+                    .push(std::mem::replace(&mut self.observations[i], next));
             }
         }
-        let collect_s = collect_start.elapsed().as_secs_f64();
-        self.env_steps += (n * steps) as u64;
+        r.seconds = start.elapsed().as_secs_f64();
+        r
+    }
 
-        // Values and old log-probabilities under the statistics the actions were taken with.
-        let obs = self.normalized(&obs_rows)?;
-        let next_obs = self.normalized(&next_rows)?;
-        let total = n * steps;
-        let actions = Tensor::from_vec(actions, (total, act_dim), &self.device)?;
-        let values: Vec<f32> = self.net.value(&obs)?.to_vec1()?;
-        let next_values: Vec<f32> = self.net.value(&next_obs)?.to_vec1()?;
+    /// Values, old log-probabilities (under the statistics the actions were taken with), GAE.
+    fn prepare(&self, rollout: &Rollout) -> Batch {
+        let observations = self.normalized(&rollout.observations);
+        let values = self.learner.net.value(&observations);
+        let next_values = self
+            .learner
+            .net
+            .value(&self.normalized(&rollout.next_observations));
         let old_log_prob = gaussian_log_prob(
-            &actions,
-            &self.net.actor.forward(&obs)?,
-            self.net.log_std.as_tensor(),
-        )?
-        .detach();
+            &rollout.actions,
+            &self.learner.net.mean(&observations),
+            &self.learner.net.log_std,
+        );
         let (advantages, returns) = gae(
             &GaeInput {
-                rewards: &rewards,
+                rewards: &rollout.rewards,
                 values: &values,
                 next_values: &next_values,
-                terminated: &terminated,
-                ended: &ended,
+                terminated: &rollout.terminated,
+                ended: &rollout.ended,
             },
-            n,
-            self.config.gamma,
-            self.config.lambda,
+            self.envs.len(),
+            self.learner.config.gamma,
+            self.learner.config.lambda,
         );
-        let adv_mean = advantages.iter().sum::<f32>() / total as f32;
-        let adv_std = (advantages
-            .iter()
-            .map(|a| (a - adv_mean).powi(2))
-            .sum::<f32>()
-            / total as f32)
-            .sqrt()
-            .max(1e-8);
-        let advantages = Tensor::from_vec(
-            advantages
-                .iter()
-                .map(|a| (a - adv_mean) / adv_std)
-                .collect::<Vec<_>>(),
-            total,
-            &self.device,
-        )?;
-        let returns = Tensor::from_vec(returns, total, &self.device)?;
-
-        let update_start = Instant::now();
-        let coefficients = LossCoefficients {
-            clip: self.config.clip,
-            value: self.config.value_coef,
-            entropy: self.config.entropy_coef,
-        };
-        let minibatch = total / self.config.minibatches.max(1);
-        let mut indices: Vec<u32> = (0..total as u32).collect();
-        let (mut sums, mut count) = ([0.0_f64; 5], 0.0);
-        for _ in 0..self.config.epochs {
-            indices.shuffle(&mut self.rng);
-            for chunk in indices.chunks(minibatch.max(1)) {
-                let idx = Tensor::new(chunk, &self.device)?;
-                let mb_obs = obs.index_select(&idx, 0)?;
-                let new_log_prob = gaussian_log_prob(
-                    &actions.index_select(&idx, 0)?,
-                    &self.net.actor.forward(&mb_obs)?,
-                    self.net.log_std.as_tensor(),
-                )?;
-                let loss = ppo_loss(
-                    &new_log_prob,
-                    &old_log_prob.index_select(&idx, 0)?,
-                    &advantages.index_select(&idx, 0)?,
-                    &self.net.value(&mb_obs)?,
-                    &returns.index_select(&idx, 0)?,
-                    self.net.log_std.as_tensor(),
-                    &coefficients,
-                )?;
-                self.optimizer.backward_step(&loss.total)?;
-                if self.config.desired_kl > 0.0 {
-                    let lr = adapt_learning_rate(
-                        self.optimizer.learning_rate(),
-                        f64::from(loss.approx_kl),
-                        self.config.desired_kl,
-                    );
-                    self.optimizer.set_learning_rate(lr);
-                }
-                for (s, v) in sums.iter_mut().zip([
-                    loss.policy,
-                    loss.value,
-                    loss.entropy,
-                    loss.approx_kl,
-                    loss.clip_fraction,
-                ]) {
-                    *s += f64::from(v);
-                }
-                count += 1.0;
-            }
+        Batch {
+            observations,
+            actions: rollout.actions.clone(),
+            old_log_prob,
+            advantages: standardize(&advantages),
+            returns,
         }
+    }
+
+    /// One iteration: a rollout, then the update. Returns its statistics.
+    pub fn iterate(&mut self) -> IterationStats {
+        let rollout = self.collect();
+        let total = rollout.rewards.len();
+        self.env_steps += total as u64;
+        let data = self.prepare(&rollout);
+        let update_start = Instant::now();
+        let loss = self.learner.update(&data, self.env_steps);
         let update_s = update_start.elapsed().as_secs_f64();
         // Statistics for the next rollout include this one's observations.
-        let rows: Vec<&[f32]> = obs_rows.iter().map(|r| r.as_slice()).collect();
+        let rows: Vec<&[f32]> = rollout.observations.iter().map(|r| r.as_slice()).collect();
         self.norm.update(&rows);
         self.iteration += 1;
-
-        let std: Vec<f32> = self.net.log_std.as_tensor().exp()?.to_vec1()?;
-        Ok(IterationStats {
+        let std = self.learner.net.log_std.iter().map(|l| f64::from(l.exp()));
+        IterationStats {
             iteration: self.iteration,
             env_steps: self.env_steps,
-            collect_steps_per_s: total as f64 / collect_s,
+            collect_steps_per_s: total as f64 / rollout.seconds,
             update_samples_per_s: total as f64 / update_s,
-            mean_step_reward: rewards.iter().map(|r| f64::from(*r)).sum::<f64>() / total as f64,
-            mean_episode_return: mean(&returns_done),
-            final_position_error: mean(&position_errors),
-            final_orientation_error: mean(&orientation_errors),
-            policy_loss: sums[0] / count,
-            value_loss: sums[1] / count,
-            entropy: sums[2] / count,
-            approx_kl: sums[3] / count,
-            clip_fraction: sums[4] / count,
-            action_std: std.iter().map(|s| f64::from(*s)).sum::<f64>() / std.len() as f64,
-            learning_rate: self.optimizer.learning_rate(),
-        })
+            mean_step_reward: rollout.rewards.iter().map(|r| f64::from(*r)).sum::<f64>()
+                / total as f64,
+            mean_episode_return: mean(&rollout.episode_returns),
+            final_position_error: mean(&rollout.position_errors),
+            final_orientation_error: mean(&rollout.orientation_errors),
+            policy_loss: loss.policy,
+            value_loss: loss.value,
+            entropy: loss.entropy,
+            approx_kl: loss.approx_kl,
+            clip_fraction: loss.clip_fraction,
+            action_std: std.sum::<f64>() / self.learner.net.log_std.len() as f64,
+            learning_rate: self.learner.optimizer.learning_rate,
+        }
+    }
+
+    /// One rollout without an update (what `kumi bench learn` times): environment steps per
+    /// second, policy inference and action sampling included.
+    pub fn collect_rate(&mut self) -> f64 {
+        let rollout = self.collect();
+        rollout.rewards.len() as f64 / rollout.seconds
     }
 
     /// The deterministic action (the mean) for a raw observation.
-    pub fn act(&self, observation: &[f32]) -> Result<Vec<f32>> {
-        let obs = self.normalized(&[observation.to_vec()])?;
-        Ok(self.net.actor.forward(&obs)?.to_vec2::<f32>()?.remove(0))
+    pub fn act(&self, observation: &[f32]) -> Vec<f32> {
+        self.learner.net.mean(&self.norm.apply(observation))
     }
 
-    /// All trainable variables.
-    pub fn vars(&self) -> Vec<Var> {
-        self.net.vars()
-    }
-
-    /// Saves the parameters (`params.safetensors`), the observation statistics and the
-    /// counters (`progress.json`) into `dir`.
+    /// Saves the parameters and Adam's moments (`params.safetensors`), the observation
+    /// statistics and the counters (`progress.json`) into `dir`.
     pub fn save_checkpoint(
         &self,
         dir: &std::path::Path,
@@ -407,22 +551,19 @@ impl<E: Environment> Trainer<E> {
         };
         std::fs::create_dir_all(dir).map_err(io(dir))?;
         let params = dir.join("params.safetensors");
-        let tensors: std::collections::HashMap<String, Tensor> = self
-            .net
-            .named_vars()
-            .into_iter()
-            .map(|(n, v)| (n, v.as_tensor().clone()))
-            .collect();
-        candle_core::safetensors::save(&tensors, &params).map_err(|e| CheckpointError::Format {
-            path: params.display().to_string(),
-            message: e.to_string(),
+        checkpoint::save(&params, &self.named_arrays()).map_err(|message| {
+            CheckpointError::Format {
+                path: params.display().to_string(),
+                message,
+            }
         })?;
         let progress = dir.join("progress.json");
         let json = serde_json::to_string_pretty(&Progress {
             iteration: self.iteration,
             env_steps: self.env_steps,
             normalizer: self.norm.clone(),
-            learning_rate: self.optimizer.learning_rate(),
+            learning_rate: self.learner.optimizer.learning_rate,
+            adam_step: self.learner.optimizer.step,
         })
         .map_err(|e| CheckpointError::Format {
             path: progress.display().to_string(),
@@ -431,9 +572,23 @@ impl<E: Environment> Trainer<E> {
         std::fs::write(&progress, json).map_err(io(&progress))
     }
 
+    /// Every saved array with its stable name: `actor`, `critic`, `log_std` and Adam's moments
+    /// (`adam.m.<group>`, `adam.v.<group>`).
+    fn named_arrays(&self) -> Vec<(String, &[f32])> {
+        let groups = ["actor", "critic", "log_std"];
+        let mut v: Vec<(String, &[f32])> = vec![
+            ("actor".into(), &self.learner.net.actor.params),
+            ("critic".into(), &self.learner.net.critic.params),
+            ("log_std".into(), &self.learner.net.log_std),
+        ];
+        for (g, name) in groups.iter().enumerate() {
+            v.push((format!("adam.m.{name}"), &self.learner.optimizer.first[g]));
+            v.push((format!("adam.v.{name}"), &self.learner.optimizer.second[g]));
+        }
+        v
+    }
+
     /// Restores what [`Self::save_checkpoint`] wrote. The networks must have the same shapes.
-    /// Adam's moment estimates are not saved (candle cannot serialise them): a resumed run
-    /// restarts them.
     pub fn load_checkpoint(
         &mut self,
         dir: &std::path::Path,
@@ -443,23 +598,36 @@ impl<E: Environment> Trainer<E> {
             path: path.display().to_string(),
             message,
         };
-        let tensors = candle_core::safetensors::load(&params, &self.device)
-            .map_err(|e| format(&params, e.to_string()))?;
-        for (name, var) in self.net.named_vars() {
-            let t = tensors
-                .get(&name)
-                .ok_or_else(|| format(&params, format!("no tensor `{name}`")))?;
-            if t.dims() != var.as_tensor().dims() {
+        let mut arrays = checkpoint::load(&params).map_err(|m| format(&params, m))?;
+        let mut take = |name: &str, into: &mut Vec<f32>| {
+            let found = arrays
+                .remove(name)
+                .ok_or_else(|| format(&params, format!("no array `{name}`")))?;
+            if found.len() != into.len() {
                 return Err(format(
                     &params,
                     format!(
-                        "`{name}` has shape {:?}, the network {:?}",
-                        t.dims(),
-                        var.as_tensor().dims()
+                        "`{name}` has {} values, the network {}",
+                        found.len(),
+                        into.len()
                     ),
                 ));
             }
-            var.set(t).map_err(|e| format(&params, e.to_string()))?;
+            *into = found;
+            Ok(())
+        };
+        take("actor", &mut self.learner.net.actor.params)?;
+        take("critic", &mut self.learner.net.critic.params)?;
+        take("log_std", &mut self.learner.net.log_std)?;
+        for (g, name) in ["actor", "critic", "log_std"].iter().enumerate() {
+            take(
+                &format!("adam.m.{name}"),
+                &mut self.learner.optimizer.first[g],
+            )?;
+            take(
+                &format!("adam.v.{name}"),
+                &mut self.learner.optimizer.second[g],
+            )?;
         }
         let progress_path = dir.join("progress.json");
         let text =
@@ -478,14 +646,111 @@ impl<E: Environment> Trainer<E> {
         self.iteration = progress.iteration;
         self.env_steps = progress.env_steps;
         self.norm = progress.normalizer;
-        self.optimizer.set_learning_rate(progress.learning_rate);
+        self.learner.optimizer.learning_rate = progress.learning_rate;
+        self.learner.optimizer.step = progress.adam_step;
         Ok(())
+    }
+}
+
+/// Named `f32` arrays in a safetensors file (one-dimensional tensors).
+mod checkpoint {
+    use std::collections::HashMap;
+
+    use safetensors::{tensor::TensorView, Dtype, SafeTensors};
+
+    pub fn save(path: &std::path::Path, arrays: &[(String, &[f32])]) -> Result<(), String> {
+        let bytes: Vec<(String, Vec<u8>, usize)> = arrays
+            .iter()
+            .map(|(name, a)| {
+                let b = a.iter().flat_map(|x| x.to_le_bytes()).collect();
+                (name.clone(), b, a.len())
+            })
+            .collect();
+        let views = bytes
+            .iter()
+            .map(|(name, b, n)| {
+                TensorView::new(Dtype::F32, vec![*n], b)
+                    .map(|v| (name.clone(), v))
+                    .map_err(|e| e.to_string())
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        safetensors::serialize_to_file(views, None, path).map_err(|e| e.to_string())
+    }
+
+    pub fn load(path: &std::path::Path) -> Result<HashMap<String, Vec<f32>>, String> {
+        let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+        let file = SafeTensors::deserialize(&bytes).map_err(|e| e.to_string())?;
+        file.tensors()
+            .into_iter()
+            .map(|(name, view)| {
+                if view.dtype() != Dtype::F32 {
+                    return Err(format!("`{name}` is {:?}, not F32", view.dtype()));
+                }
+                let values = view
+                    .data()
+                    .chunks_exact(4)
+                    .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                    .collect();
+                Ok((name, values))
+            })
+            .collect()
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::adapt_learning_rate;
+    use super::{adapt_learning_rate, gather, standardize, PpoConfig};
+
+    #[test]
+    fn annealing_by_hand() {
+        let c = PpoConfig {
+            total_steps: 1000,
+            anneal_after: 0.6,
+            anneal_final: 0.1,
+            ..PpoConfig::default()
+        };
+        assert_eq!(c.anneal(0), 1.0);
+        assert_eq!(c.anneal(600), 1.0);
+        // Halfway through the annealed part: 1 + (0.1 - 1) * 0.5 = 0.55.
+        assert!((c.anneal(800) - 0.55).abs() < 1e-12);
+        assert!((c.anneal(1000) - 0.1).abs() < 1e-12);
+        assert!((c.anneal(5000) - 0.1).abs() < 1e-12, "held at the end");
+        // Off by default.
+        assert_eq!(PpoConfig::default().anneal(479_999), 1.0);
+    }
+
+    #[test]
+    fn configs_that_cannot_train_are_refused() {
+        assert!(PpoConfig::default().check().is_ok());
+        for bad in [
+            PpoConfig {
+                num_envs: 0,
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                minibatches: 5000,
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                anneal_final: 0.0,
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                anneal_after: 1.5,
+                ..PpoConfig::default()
+            },
+        ] {
+            assert!(bad.check().is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn rows_are_gathered_and_advantages_standardised() {
+        let xs = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        assert_eq!(gather(&xs, 2, &[2, 0]), vec![5.0, 6.0, 1.0, 2.0]);
+        let z = standardize(&[1.0, 3.0]);
+        assert_eq!(z, vec![-1.0, 1.0]);
+    }
 
     #[test]
     fn learning_rate_adapts_to_the_kl_divergence() {
