@@ -9,25 +9,6 @@ use std::iter::Sum;
 pub trait Real:
     num_traits::Float + Sum + Default + Debug + Send + Sync + std::ops::AddAssign + 'static
 {
-    /// `c = alpha a b + beta c` for strided matrices.
-    ///
-    /// # Safety
-    /// Every index `(i, j)` of the three matrices, with the given dimensions and strides, is in
-    /// bounds of its slice ([`matmul`] checks this).
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn gemm(
-        m: usize,
-        k: usize,
-        n: usize,
-        a: &[Self],
-        a_strides: (isize, isize),
-        b: &[Self],
-        b_strides: (isize, isize),
-        beta: Self,
-        c: &mut [Self],
-        c_strides: (isize, isize),
-    );
-
     fn of(x: f64) -> Self;
 
     /// ELU (alpha 1) of every element, in place.
@@ -35,22 +16,6 @@ pub trait Real:
 }
 
 impl Real for f32 {
-    unsafe fn gemm(
-        m: usize,
-        k: usize,
-        n: usize,
-        a: &[f32],
-        (ar, ac): (isize, isize),
-        b: &[f32],
-        (br, bc): (isize, isize),
-        beta: f32,
-        c: &mut [f32],
-        (cr, cc): (isize, isize),
-    ) {
-        // SAFETY: the caller guarantees the bounds.
-        unsafe { generic_gemm(m, k, n, a, (ar, ac), b, (br, bc), beta, c, (cr, cc)) }
-    }
-
     fn of(x: f64) -> Self {
         x as f32
     }
@@ -87,22 +52,6 @@ fn exp_nonpositive(x: f32) -> f32 {
 }
 
 impl Real for f64 {
-    unsafe fn gemm(
-        m: usize,
-        k: usize,
-        n: usize,
-        a: &[f64],
-        (ar, ac): (isize, isize),
-        b: &[f64],
-        (br, bc): (isize, isize),
-        beta: f64,
-        c: &mut [f64],
-        (cr, cc): (isize, isize),
-    ) {
-        // SAFETY: the caller guarantees the bounds.
-        unsafe { generic_gemm(m, k, n, a, (ar, ac), b, (br, bc), beta, c, (cr, cc)) }
-    }
-
     fn of(x: f64) -> Self {
         x
     }
@@ -116,11 +65,13 @@ impl Real for f64 {
     }
 }
 
-/// `c = a b + beta c` on the `gemm` crate, single-threaded (kumi parallelises over blocks of
-/// rows instead, which keeps results independent of the thread count).
+/// `c = a b + beta c` on the `gemm` crate for strided matrices, single-threaded (kumi
+/// parallelises over blocks of rows instead, which keeps results independent of the thread
+/// count).
 ///
 /// # Safety
-/// As [`Real::gemm`].
+/// Every index `(i, j)` of the three matrices, with the given dimensions and strides, is in
+/// bounds of its slice ([`matmul`] checks this).
 #[allow(clippy::too_many_arguments)]
 unsafe fn generic_gemm<T: Real>(
     m: usize,
@@ -215,7 +166,7 @@ pub fn matmul<T: Real>(a: Mat<T>, b: Mat<T>, c: &mut [T], accumulate: bool) {
     let beta = if accumulate { T::one() } else { T::zero() };
     // SAFETY: the asserts above bound every index of the three views.
     unsafe {
-        T::gemm(
+        generic_gemm(
             a.rows,
             a.cols,
             b.cols,

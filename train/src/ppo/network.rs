@@ -18,6 +18,9 @@ use crate::ppo::loss::{block_loss, finish, Loss, LossCoefficients, Samples};
 /// still makes four blocks.
 pub const BLOCK_ROWS: usize = 256;
 
+/// Names of the parameter groups (checkpoints), in the order of [`ActorCritic::groups`].
+pub const GROUP_NAMES: [&str; 3] = ["actor", "critic", "log_std"];
+
 /// A Gaussian policy (mean from the actor MLP, learned log-std) and a value function.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ActorCritic<T = f32> {
@@ -90,6 +93,11 @@ impl<T: Real> ActorCritic<T> {
             self.critic.params.len(),
             self.log_std.len(),
         ]
+    }
+
+    /// The parameter groups, named [`GROUP_NAMES`], in the order of [`Gradient::groups`].
+    pub fn groups(&self) -> [&[T]; 3] {
+        [&self.actor.params, &self.critic.params, &self.log_std]
     }
 
     /// The parameter groups, mutably, in the order of [`Gradient::groups`].

@@ -13,7 +13,7 @@ use crate::env::Environment;
 use crate::nn::adam::Adam;
 use crate::ppo::gae::{gae, GaeInput};
 use crate::ppo::loss::{gaussian_log_prob, Loss, LossCoefficients, Samples};
-use crate::ppo::network::{ActorCritic, Minibatch};
+use crate::ppo::network::{ActorCritic, Minibatch, GROUP_NAMES};
 use crate::ppo::normalizer::RunningNorm;
 
 /// Every PPO hyperparameter. Defaults follow the paper's Table II where it gives one.
@@ -223,6 +223,8 @@ pub struct Trainer<E: Environment> {
 struct Rollout {
     /// Raw observations and the observations after each step.
     observations: Vec<Vec<f32>>,
+    /// The observations as the policy saw them (normalised), [rows, D].
+    normalized: Vec<f32>,
     next_observations: Vec<Vec<f32>>,
     /// [rows, A]
     actions: Vec<f32>,
@@ -351,6 +353,7 @@ impl Learner {
                         self.config.desired_kl,
                     );
                 }
+                sum.total += loss.total;
                 sum.policy += loss.policy;
                 sum.value += loss.value;
                 sum.entropy += loss.entropy;
@@ -360,7 +363,7 @@ impl Learner {
             }
         }
         Loss {
-            total: f64::NAN,
+            total: sum.total / count,
             policy: sum.policy / count,
             value: sum.value / count,
             entropy: sum.entropy / count,
@@ -410,6 +413,7 @@ impl<E: Environment> Trainer<E> {
         let std: Vec<f32> = self.learner.net.log_std.iter().map(|l| l.exp()).collect();
         let mut r = Rollout {
             observations: Vec::with_capacity(n * steps),
+            normalized: Vec::new(),
             next_observations: Vec::with_capacity(n * steps),
             actions: Vec::with_capacity(n * steps * std.len()),
             rewards: Vec::with_capacity(n * steps),
@@ -422,7 +426,9 @@ impl<E: Environment> Trainer<E> {
         };
         let start = Instant::now();
         for _ in 0..steps {
-            let mut actions = self.learner.net.mean(&self.normalized(&self.observations));
+            let normalized = self.normalized(&self.observations);
+            let mut actions = self.learner.net.mean(&normalized);
+            r.normalized.extend_from_slice(&normalized);
             for (k, a) in actions.iter_mut().enumerate() {
                 let z: f64 = StandardNormal.sample(&mut self.rng);
                 *a += std[k % std.len()] * z as f32;
@@ -460,15 +466,17 @@ impl<E: Environment> Trainer<E> {
     }
 
     /// Values, old log-probabilities (under the statistics the actions were taken with), GAE.
-    fn prepare(&self, rollout: &Rollout) -> Batch {
-        let observations = self.normalized(&rollout.observations);
+    /// Moves the normalised observations and the actions out of the rollout.
+    fn prepare(&self, rollout: &mut Rollout) -> Batch {
+        let observations = std::mem::take(&mut rollout.normalized);
+        let actions = std::mem::take(&mut rollout.actions);
         let values = self.learner.net.value(&observations);
         let next_values = self
             .learner
             .net
             .value(&self.normalized(&rollout.next_observations));
         let old_log_prob = gaussian_log_prob(
-            &rollout.actions,
+            &actions,
             &self.learner.net.mean(&observations),
             &self.learner.net.log_std,
         );
@@ -486,7 +494,7 @@ impl<E: Environment> Trainer<E> {
         );
         Batch {
             observations,
-            actions: rollout.actions.clone(),
+            actions,
             old_log_prob,
             advantages: standardize(&advantages),
             returns,
@@ -495,10 +503,10 @@ impl<E: Environment> Trainer<E> {
 
     /// One iteration: a rollout, then the update. Returns its statistics.
     pub fn iterate(&mut self) -> IterationStats {
-        let rollout = self.collect();
+        let mut rollout = self.collect();
         let total = rollout.rewards.len();
         self.env_steps += total as u64;
-        let data = self.prepare(&rollout);
+        let data = self.prepare(&mut rollout);
         let update_start = Instant::now();
         let loss = self.learner.update(&data, self.env_steps);
         let update_s = update_start.elapsed().as_secs_f64();
@@ -575,15 +583,12 @@ impl<E: Environment> Trainer<E> {
     /// Every saved array with its stable name: `actor`, `critic`, `log_std` and Adam's moments
     /// (`adam.m.<group>`, `adam.v.<group>`).
     fn named_arrays(&self) -> Vec<(String, &[f32])> {
-        let groups = ["actor", "critic", "log_std"];
-        let mut v: Vec<(String, &[f32])> = vec![
-            ("actor".into(), &self.learner.net.actor.params),
-            ("critic".into(), &self.learner.net.critic.params),
-            ("log_std".into(), &self.learner.net.log_std),
-        ];
-        for (g, name) in groups.iter().enumerate() {
-            v.push((format!("adam.m.{name}"), &self.learner.optimizer.first[g]));
-            v.push((format!("adam.v.{name}"), &self.learner.optimizer.second[g]));
+        let (net, adam) = (&self.learner.net, &self.learner.optimizer);
+        let mut v = Vec::new();
+        for (g, (name, params)) in GROUP_NAMES.iter().zip(net.groups()).enumerate() {
+            v.push((name.to_string(), params));
+            v.push((format!("adam.m.{name}"), adam.first[g].as_slice()));
+            v.push((format!("adam.v.{name}"), adam.second[g].as_slice()));
         }
         v
     }
@@ -599,7 +604,7 @@ impl<E: Environment> Trainer<E> {
             message,
         };
         let mut arrays = checkpoint::load(&params).map_err(|m| format(&params, m))?;
-        let mut take = |name: &str, into: &mut Vec<f32>| {
+        let mut take = |name: &str, into: &mut [f32]| {
             let found = arrays
                 .remove(name)
                 .ok_or_else(|| format(&params, format!("no array `{name}`")))?;
@@ -613,21 +618,14 @@ impl<E: Environment> Trainer<E> {
                     ),
                 ));
             }
-            *into = found;
+            into.copy_from_slice(&found);
             Ok(())
         };
-        take("actor", &mut self.learner.net.actor.params)?;
-        take("critic", &mut self.learner.net.critic.params)?;
-        take("log_std", &mut self.learner.net.log_std)?;
-        for (g, name) in ["actor", "critic", "log_std"].iter().enumerate() {
-            take(
-                &format!("adam.m.{name}"),
-                &mut self.learner.optimizer.first[g],
-            )?;
-            take(
-                &format!("adam.v.{name}"),
-                &mut self.learner.optimizer.second[g],
-            )?;
+        let (net, adam) = (&mut self.learner.net, &mut self.learner.optimizer);
+        for (g, (name, params)) in GROUP_NAMES.iter().zip(net.groups_mut()).enumerate() {
+            take(name, params)?;
+            take(&format!("adam.m.{name}"), &mut adam.first[g])?;
+            take(&format!("adam.v.{name}"), &mut adam.second[g])?;
         }
         let progress_path = dir.join("progress.json");
         let text =
