@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use kumi_policies::goals::GoalDistribution;
 use kumi_policies::skill::ArmSkill;
-use kumi_runtime::{BackendChoice, SkillPolicy};
+use kumi_runtime::{BackendChoice, SkillPolicy, WholeBodyPolicy};
 use kumi_train::arm_reach::ArmReachConfig;
 use kumi_train::evaluate::evaluate;
 
@@ -18,6 +18,147 @@ use crate::sim::load_model;
 pub enum EvalCommand {
     /// The low-level skill: final tool errors at the end of each 4 s goal (SPEC section 4).
     Arm(EvalArmArgs),
+    /// A whole-body policy over the frozen skill: final tool errors, leg orientation,
+    /// undesired contacts and falls over whole episodes (SPEC section 6).
+    WholeBody(EvalBodyArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct EvalBodyArgs {
+    /// `minimal`, `dragon`, `tricycle`, or a path to a morphology file.
+    pub morphology: String,
+    /// The ONNX policy (default: the shipped policies/<robot>_whole_body.onnx).
+    #[arg(long)]
+    pub policy: Option<PathBuf>,
+    /// The training config the policy was trained with (task and action bounds; default:
+    /// the shipped one for the robot).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The frozen skill (default: the shipped policies/arm_reach.onnx).
+    #[arg(long)]
+    pub skill: Option<PathBuf>,
+    /// Episodes to evaluate.
+    #[arg(long, default_value_t = 1000)]
+    pub rollouts: usize,
+    /// Seed of the episodes (start poses, targets).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Inference backend for the whole-body policy: auto, onnxruntime or tract.
+    #[arg(long, default_value = "auto")]
+    pub backend: BackendChoice,
+    /// Physics engines to evaluate in, one report each (e.g. `rapier,mujoco`; default: the
+    /// training engine).
+    #[arg(long, value_delimiter = ',', value_parser = crate::engine::parse)]
+    pub engine: Vec<kumi_worlds::Engine>,
+    /// Print one JSON object (an array for several engines) instead of markdown.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(what: EvalCommand) -> Result<()> {
+    match what {
+        EvalCommand::Arm(args) => run_arm(args),
+        EvalCommand::WholeBody(args) => run_whole_body(args),
+    }
+}
+
+/// A path relative to the working directory when inside it, so reports do not carry a home
+/// path.
+fn shown(path: &std::path::Path) -> String {
+    std::env::current_dir()
+        .ok()
+        .and_then(|cwd| path.strip_prefix(cwd).ok().map(|p| p.display().to_string()))
+        .unwrap_or_else(|| path.display().to_string())
+}
+
+fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
+    anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
+    let model = load_model(&args.morphology)?;
+    let file = crate::train::read_body_config(args.config.as_deref(), &model.name)?;
+    let path = args
+        .policy
+        .clone()
+        .unwrap_or_else(|| kumi_runtime::shipped_whole_body_policy(&model.name));
+    let skill_path = args
+        .skill
+        .clone()
+        .unwrap_or_else(kumi_runtime::shipped_arm_policy);
+    let skill = std::fs::read(&skill_path)
+        .with_context(|| format!("reading the skill {}", skill_path.display()))?;
+    let terms = kumi_terms::ActionTerms::new(&model, &file.action)?;
+    let control_hz = kumi_worlds::SimConfig::for_model(&model).control_hz;
+    let expected = kumi_terms::contract::contract(&model, &terms, &skill, control_hz);
+    let probe = WholeBodyPolicy::load(&path, &expected, args.backend)?;
+    let backend = probe.backend();
+    let steps = probe
+        .metadata()
+        .get(kumi_policies::metadata::ENV_STEPS)
+        .cloned()
+        .unwrap_or_else(|| "?".into());
+    drop(probe);
+    let engines = if args.engine.is_empty() {
+        vec![crate::engine::choose(
+            None,
+            kumi_worlds::default_training_engine(),
+        )?]
+    } else {
+        args.engine.clone()
+    };
+    let mut results = Vec::new();
+    for &engine in &engines {
+        crate::engine::choose(Some(engine), engine)?;
+        eprintln!(
+            "evaluating {} ({backend} backend, {engine} engine) over {} episodes",
+            path.display(),
+            args.rollouts
+        );
+        let start = Instant::now();
+        let config = kumi_train::whole_body::WholeBodyConfig {
+            engine,
+            task: file.task,
+            weights: file.reward,
+            bounds: file.action,
+        };
+        let result = kumi_train::evaluate_body::evaluate_body(
+            model.clone(),
+            config,
+            &skill,
+            args.rollouts,
+            args.seed,
+            || {
+                let mut policy = WholeBodyPolicy::load(&path, &expected, args.backend)
+                    .map_err(|e| e.to_string())?;
+                Ok(move |obs: &[f32]| policy.act(obs).map_err(|e| e.to_string()))
+            },
+        )
+        .context("evaluation failed")?;
+        eprintln!("done in {:.1} s", start.elapsed().as_secs_f64());
+        results.push(result);
+    }
+    if args.json {
+        match results.as_slice() {
+            [one] => println!("{}", serde_json::to_string(one)?),
+            many => println!("{}", serde_json::to_string(many)?),
+        }
+    } else {
+        println!(
+            "# {} whole-body policy: evaluation\n\n- policy: `{}` (trained for {steps} environment steps), skill `{}`\n- protocol: {} episodes of {} s from a random start pose (x, y within +-{} m, any heading) to a random target (x, y within +-{} m, z in [{}, {}] m, any yaw); errors at the episode's end, over episodes that did not fall; episode seed {}\n- inference: {backend} backend",
+            model.name,
+            shown(&path),
+            shown(&skill_path),
+            args.rollouts,
+            file.task.episode_s,
+            file.task.initial_xy_m,
+            file.task.target_xy_m,
+            file.task.target_z_m[0],
+            file.task.target_z_m[1],
+            args.seed,
+        );
+        for result in &results {
+            print!("\n{}", result.markdown());
+        }
+    }
+    Ok(())
 }
 
 #[derive(Args, Debug)]
@@ -52,8 +193,7 @@ pub struct EvalArmArgs {
     pub json: bool,
 }
 
-pub fn run(what: EvalCommand) -> Result<()> {
-    let EvalCommand::Arm(args) = what;
+fn run_arm(args: EvalArmArgs) -> Result<()> {
     anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
     let path = args.policy.unwrap_or_else(kumi_runtime::shipped_arm_policy);
     let model = load_model("arm")?;
@@ -71,11 +211,7 @@ pub fn run(what: EvalCommand) -> Result<()> {
             .cloned()
             .unwrap_or_else(|| "?".into())
     };
-    // Relative to the working directory when inside it, so reports do not carry a home path.
-    let shown = std::env::current_dir()
-        .ok()
-        .and_then(|cwd| path.strip_prefix(cwd).ok().map(|p| p.display().to_string()))
-        .unwrap_or_else(|| path.display().to_string());
+    let shown = shown(&path);
     let provenance = format!(
         "- policy: `{}` (trained for {} environment steps, config fingerprint {})\n- protocol: {} goals, each held 4 s (120 steps at {} Hz) in 12 s episodes from random initial joints, goal noise as in training; error at the end of each goal; episode seed {}\n- inference: {backend} backend\n",
         shown,

@@ -7,9 +7,13 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use kumi_terms::action::GoalBounds;
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig};
+use kumi_train::body_reward::BodyWeights;
+use kumi_train::env::Environment;
 use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
 use kumi_train::reward::ReachWeights;
+use kumi_train::whole_body::{TaskConfig, WholeBody, WholeBodyConfig};
 
 /// The training config file: PPO hyperparameters, the reward's weights and the goals.
 #[derive(Debug, serde::Deserialize, serde::Serialize)]
@@ -42,22 +46,19 @@ use crate::sim::load_model;
 pub enum TrainCommand {
     /// The low-level skill: one fixed-base arm reaching goals (SPEC section 4).
     Arm(TrainArmArgs),
+    /// An upper-level policy over the frozen skill for one morphology (SPEC section 5).
+    WholeBody(TrainBodyArgs),
 }
 
+/// What every training command takes.
 #[derive(Args, Debug)]
-pub struct TrainArmArgs {
-    /// PPO hyperparameters (TOML; default: the shipped train/configs/arm_reach.toml).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
+pub struct RunArgs {
     /// Override the number of environment steps.
     #[arg(long)]
     pub steps: Option<u64>,
     /// Override the seed.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Where metrics (metrics.csv) and checkpoints (checkpoint/) go.
-    #[arg(long, default_value = "runs/arm_reach")]
-    pub out: PathBuf,
     /// Physics engine (default: mujoco when this build has it, else rapier).
     #[arg(long, value_parser = crate::engine::parse)]
     pub engine: Option<kumi_worlds::Engine>,
@@ -70,6 +71,36 @@ pub struct TrainArmArgs {
     pub resume: Option<PathBuf>,
 }
 
+#[derive(Args, Debug)]
+pub struct TrainArmArgs {
+    /// PPO hyperparameters (TOML; default: the shipped train/configs/arm_reach.toml).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Where metrics (metrics.csv), checkpoints (checkpoint/) and the policy go.
+    #[arg(long, default_value = "runs/arm_reach")]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+#[derive(Args, Debug)]
+pub struct TrainBodyArgs {
+    /// `minimal`, `dragon`, `tricycle`, or a path to a morphology file (one manipulator).
+    pub morphology: String,
+    /// Task, reward, action bounds and PPO settings (TOML; default for a shipped robot:
+    /// train/configs/whole_body/<morphology>.toml; required for another).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The frozen skill every arm module runs (default: the shipped policies/arm_reach.onnx).
+    #[arg(long)]
+    pub skill: Option<PathBuf>,
+    /// Where metrics, checkpoints and the policy go (default: runs/<robot>_whole_body).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
 /// Iterations between checkpoints.
 const CHECKPOINT_EVERY: usize = 10;
 /// Iterations between progress lines when stderr is not a terminal.
@@ -77,15 +108,57 @@ const LOG_EVERY: usize = 5;
 
 const SHIPPED_CONFIG: &str = include_str!("../../train/configs/arm_reach.toml");
 
-const COLUMNS: [&str; 16] = [
+/// The shipped whole-body configs, by robot name.
+pub const SHIPPED_BODY_CONFIGS: [(&str, &str); 3] = [
+    (
+        "minimal",
+        include_str!("../../train/configs/whole_body/minimal.toml"),
+    ),
+    (
+        "dragon",
+        include_str!("../../train/configs/whole_body/dragon.toml"),
+    ),
+    (
+        "tricycle",
+        include_str!("../../train/configs/whole_body/tricycle.toml"),
+    ),
+];
+
+/// The whole-body training config file.
+#[derive(Debug, Clone, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainBodyConfig {
+    pub ppo: PpoConfig,
+    pub task: TaskConfig,
+    pub reward: BodyWeights,
+    pub action: GoalBounds,
+}
+
+/// The whole-body config at `path`, or the one shipped for `robot`.
+pub fn read_body_config(path: Option<&std::path::Path>, robot: &str) -> Result<TrainBodyConfig> {
+    let (text, label) = match path {
+        Some(path) => (
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?,
+            path.display().to_string(),
+        ),
+        None => match SHIPPED_BODY_CONFIGS.iter().find(|(name, _)| *name == robot) {
+            Some((_, text)) => (text.to_string(), format!("the shipped config for {robot}")),
+            None => bail!(
+                "no shipped whole-body config for robot `{robot}`: pass --config FILE (start from train/configs/whole_body/tricycle.toml)"
+            ),
+        },
+    };
+    toml::from_str(&text).with_context(|| format!("parsing {label}"))
+}
+
+/// The generic columns of metrics.csv; the environment's own metrics follow, then `wall_s`.
+const COLUMNS: [&str; 14] = [
     "iteration",
     "env_steps",
     "collect_steps_per_s",
     "update_samples_per_s",
     "mean_step_reward",
     "mean_episode_return",
-    "final_position_error",
-    "final_orientation_error",
     "policy_loss",
     "value_loss",
     "entropy",
@@ -93,19 +166,24 @@ const COLUMNS: [&str; 16] = [
     "clip_fraction",
     "action_std",
     "learning_rate",
-    "wall_s",
+    "episodes",
 ];
 
+fn header(metrics: &[&str]) -> String {
+    let mut all: Vec<&str> = COLUMNS.to_vec();
+    all.extend_from_slice(metrics);
+    all.push("wall_s");
+    all.join(",")
+}
+
 fn row(s: &IterationStats, wall_s: f64) -> String {
-    let v = [
+    let mut v = vec![
         s.iteration as f64,
         s.env_steps as f64,
         s.collect_steps_per_s,
         s.update_samples_per_s,
         s.mean_step_reward,
         s.mean_episode_return,
-        s.final_position_error,
-        s.final_orientation_error,
         s.policy_loss,
         s.value_loss,
         s.entropy,
@@ -113,19 +191,18 @@ fn row(s: &IterationStats, wall_s: f64) -> String {
         s.clip_fraction,
         s.action_std,
         s.learning_rate,
-        wall_s,
+        s.episodes as f64,
     ];
+    v.extend(s.metrics.iter().map(|(_, x)| *x));
+    v.push(wall_s);
     v.iter()
         .map(|x| x.to_string())
         .collect::<Vec<_>>()
         .join(",")
 }
 
-pub fn run(what: TrainCommand) -> Result<()> {
-    let TrainCommand::Arm(args) = what;
-    let file = read_config(args.config.as_deref())?;
-    let goals = file.goals.resolve()?;
-    let mut config = file.ppo;
+/// Applies the shared overrides to a config and sets up the thread pool.
+fn prepare(config: &mut PpoConfig, args: &RunArgs) -> Result<()> {
     if let Some(s) = args.steps {
         config.total_steps = s;
     }
@@ -148,13 +225,11 @@ pub fn run(what: TrainCommand) -> Result<()> {
         "{} threads (a seeded run gives the same bits on any number)",
         rayon::current_num_threads()
     );
-    // What is trained, overrides included: its fingerprint goes into the policy's metadata.
-    let trained = TrainArmConfig {
-        ppo: config.clone(),
-        reward: file.reward,
-        goals: file.goals.clone(),
-    };
-    let model = load_model("arm")?;
+    Ok(())
+}
+
+/// The engine to train on, said aloud.
+fn training_engine(args: &RunArgs) -> Result<kumi_worlds::Engine> {
     let engine = crate::engine::choose(args.engine, kumi_worlds::default_training_engine())?;
     eprintln!(
         "training on the {engine} engine{}",
@@ -167,26 +242,28 @@ pub fn run(what: TrainCommand) -> Result<()> {
             String::new()
         }
     );
-    let envs = (0..config.num_envs)
-        .map(|i| {
-            ArmReach::new(
-                model.clone(),
-                ArmReachConfig {
-                    engine,
-                    weights: file.reward,
-                    goals: goals.clone(),
-                    ..ArmReachConfig::default()
-                },
-                config.seed.wrapping_mul(1000).wrapping_add(i as u64),
-            )
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let csv_path = args.out.join("metrics.csv");
+    Ok(engine)
+}
+
+/// The one training runner: PPO over `envs` until `config.total_steps`, with metrics.csv,
+/// progress (a bar on a terminal, a line every few iterations otherwise), checkpoints and
+/// resume; then the deterministic actor exported to `out/<name>.onnx` with `metadata` (its
+/// step count added).
+fn train<E: Environment>(
+    what: &str,
+    config: PpoConfig,
+    envs: Vec<E>,
+    args: &RunArgs,
+    out: &std::path::Path,
+    mut metadata: std::collections::BTreeMap<String, String>,
+    name: &str,
+) -> Result<PathBuf> {
+    let metric_names = envs.first().map(|e| e.metric_names()).unwrap_or(&[]);
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let csv_path = out.join("metrics.csv");
     let mut csv = std::fs::File::create(&csv_path)
         .with_context(|| format!("creating {}", csv_path.display()))?;
-    writeln!(csv, "{}", COLUMNS.join(","))?;
+    writeln!(csv, "{}", header(metric_names))?;
 
     let total = config.total_steps;
     let mut trainer = Trainer::new(config, envs)?;
@@ -198,13 +275,12 @@ pub fn run(what: TrainCommand) -> Result<()> {
             trainer.env_steps
         );
     }
-    let checkpoint = args.out.join("checkpoint");
+    let checkpoint = out.join("checkpoint");
     let start = Instant::now();
     eprintln!(
-        "training the arm-reaching skill for {total} steps; metrics in {}",
+        "training {what} for {total} steps; metrics in {}",
         csv_path.display()
     );
-    // A live bar on a terminal; on a pipe or file (CI, nohup) a line every few iterations.
     let bar = ProgressBar::new(total).with_style(
         ProgressStyle::with_template(
             "{bar:30} {pos}/{len} steps [{elapsed_precise} < {eta_precise}] {msg}",
@@ -216,13 +292,17 @@ pub fn run(what: TrainCommand) -> Result<()> {
         let s = trainer.iterate();
         let wall = start.elapsed().as_secs_f64();
         writeln!(csv, "{}", row(&s, wall))?;
+        let figures: Vec<String> = s
+            .metrics
+            .iter()
+            .map(|(name, v)| format!("{name} {v:.3}"))
+            .collect();
         let status = format!(
-            "{:.0} steps/s collect, {:.0} samples/s update | reward/step {:.3} | final error {:.3} m, {:.3} rad | std {:.3}",
+            "{:.0} steps/s collect, {:.0} samples/s update | reward/step {:.3} | {} | std {:.3}",
             s.collect_steps_per_s,
             s.update_samples_per_s,
             s.mean_step_reward,
-            s.final_position_error,
-            s.final_orientation_error,
+            figures.join(", "),
             s.action_std,
         );
         bar.set_position(s.env_steps.min(total));
@@ -245,24 +325,143 @@ pub fn run(what: TrainCommand) -> Result<()> {
     trainer.save_checkpoint(&checkpoint)?;
     eprintln!("checkpoint in {}", checkpoint.display());
 
-    // The deterministic actor, normalisation included, with the skill's metadata.
-    let metadata = kumi_policies::skill::ArmSkill::new(
-        &model.modules[0],
-        kumi_worlds::SimConfig::for_model(&model).control_hz,
-    )?
-    .metadata(
-        // Of the values, not the text: comments and layout do not change what was trained.
-        &kumi_policies::metadata::fingerprint(&serde_json::to_string(&trained)?),
-        trainer.env_steps,
+    metadata.insert(
+        kumi_policies::metadata::ENV_STEPS.into(),
+        trainer.env_steps.to_string(),
     );
     let onnx = kumi_train::export::actor_model(
         &trainer.norm,
         &trainer.learner.net.actor.parameters(),
         &metadata,
     );
-    let onnx_path = args.out.join("arm_reach.onnx");
+    let onnx_path = out.join(format!("{name}.onnx"));
     std::fs::write(&onnx_path, kumi_train::export::encode(&onnx))
         .with_context(|| format!("writing {}", onnx_path.display()))?;
-    eprintln!("policy in {}", onnx_path.display());
+    eprintln!(
+        "policy in {} ({:.0} s)",
+        onnx_path.display(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(onnx_path)
+}
+
+pub fn run(what: TrainCommand) -> Result<()> {
+    match what {
+        TrainCommand::Arm(args) => train_arm(args),
+        TrainCommand::WholeBody(args) => train_whole_body(args),
+    }
+}
+
+fn train_arm(args: TrainArmArgs) -> Result<()> {
+    let file = read_config(args.config.as_deref())?;
+    let goals = file.goals.resolve()?;
+    let mut config = file.ppo;
+    prepare(&mut config, &args.run)?;
+    // What is trained, overrides included: its fingerprint goes into the policy's metadata.
+    let trained = TrainArmConfig {
+        ppo: config.clone(),
+        reward: file.reward,
+        goals: file.goals.clone(),
+    };
+    let model = load_model("arm")?;
+    let engine = training_engine(&args.run)?;
+    let envs = (0..config.num_envs)
+        .map(|i| {
+            ArmReach::new(
+                model.clone(),
+                ArmReachConfig {
+                    engine,
+                    weights: file.reward,
+                    goals: goals.clone(),
+                    ..ArmReachConfig::default()
+                },
+                config.seed.wrapping_mul(1000).wrapping_add(i as u64),
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    // The deterministic actor, normalisation included, with the skill's metadata.
+    let mut metadata = kumi_policies::skill::ArmSkill::new(
+        &model.modules[0],
+        kumi_worlds::SimConfig::for_model(&model).control_hz,
+    )?
+    .metadata(
+        // Of the values, not the text: comments and layout do not change what was trained.
+        &kumi_policies::metadata::fingerprint(&serde_json::to_string(&trained)?),
+        0,
+    );
+    metadata.remove(kumi_policies::metadata::ENV_STEPS);
+    train(
+        "the arm-reaching skill",
+        config,
+        envs,
+        &args.run,
+        &args.out,
+        metadata,
+        "arm_reach",
+    )?;
+    Ok(())
+}
+
+fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
+    let model = load_model(&args.morphology)?;
+    let file = read_body_config(args.config.as_deref(), &model.name)?;
+    let mut config = file.ppo.clone();
+    prepare(&mut config, &args.run)?;
+    let trained = TrainBodyConfig {
+        ppo: config.clone(),
+        ..file.clone()
+    };
+    let skill_path = args
+        .skill
+        .clone()
+        .unwrap_or_else(kumi_runtime::shipped_arm_policy);
+    let skill = std::fs::read(&skill_path)
+        .with_context(|| format!("reading the skill {}", skill_path.display()))?;
+    let engine = training_engine(&args.run)?;
+    let body = WholeBodyConfig {
+        engine,
+        task: file.task,
+        weights: file.reward,
+        bounds: file.action,
+    };
+    let envs = (0..config.num_envs)
+        .map(|i| {
+            WholeBody::new(
+                model.clone(),
+                body.clone(),
+                &skill,
+                config.seed.wrapping_mul(1000).wrapping_add(i as u64),
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .with_context(|| format!("building the whole-body environment for `{}`", model.name))?;
+    let control_hz = kumi_worlds::SimConfig::for_model(&model).control_hz;
+    let mut metadata = kumi_terms::contract::contract(&model, envs[0].terms(), &skill, control_hz);
+    metadata.insert(
+        kumi_policies::metadata::CONFIG_HASH.into(),
+        kumi_policies::metadata::fingerprint(&serde_json::to_string(&trained)?),
+    );
+    eprintln!(
+        "{}: {} observations, {} actions ({}); skill {}",
+        model.name,
+        envs[0].observation_dim(),
+        envs[0].terms().size(),
+        envs[0].terms().describe(),
+        skill_path.display()
+    );
+    let name = format!("{}_whole_body", model.name);
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs").join(&name));
+    train(
+        &format!("the whole-body policy of `{}`", model.name),
+        config,
+        envs,
+        &args.run,
+        &out,
+        metadata,
+        &name,
+    )?;
     Ok(())
 }

@@ -157,7 +157,7 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
     assert!(lines[1].starts_with("1,4096,"), "{}", lines[1]);
     let progress = String::from_utf8_lossy(&out.stderr);
     assert!(
-        progress.contains("steps/s collect") && progress.contains("final error"),
+        progress.contains("steps/s collect") && progress.contains("final_position_error_m"),
         "{progress}"
     );
     // Training says which engine it uses: MuJoCo where the build has it.
@@ -167,6 +167,78 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
         "training on the rapier engine"
     };
     assert!(progress.contains(engine), "{progress}");
+}
+
+#[test]
+fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
+    let out_dir = std::env::temp_dir().join(format!("kumi-train-wb-{}", std::process::id()));
+    let out = kumi(&[
+        "train",
+        "whole-body",
+        "minimal",
+        "--steps",
+        "4096",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    let progress = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{progress}");
+    assert!(
+        progress.contains("minimal: 19 observations, 7 actions"),
+        "{progress}"
+    );
+    let csv = std::fs::read_to_string(out_dir.join("metrics.csv")).unwrap();
+    assert!(
+        csv.lines().next().unwrap().ends_with(
+            "episodes,final_position_error_m,final_yaw_error_rad,termination_rate,wall_s"
+        ),
+        "{csv}"
+    );
+    let policy = out_dir.join("minimal_whole_body.onnx");
+    let eval = kumi(&[
+        "eval",
+        "whole-body",
+        "minimal",
+        "--policy",
+        policy.to_str().unwrap(),
+        "--rollouts",
+        "2",
+        "--backend",
+        "tract",
+        "--json",
+    ]);
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
+    assert_eq!(v["rollouts"], 2);
+    assert_eq!(v["robot"], "minimal");
+    for key in ["position_error_m", "yaw_error_rad", "contacts_per_episode"] {
+        assert!(
+            v[key]["mean"].is_number() || v["terminations"] == 2,
+            "{key}: {v}"
+        );
+    }
+    assert!(v["terminations"].as_u64().unwrap() <= 2);
+    // A policy for Minimal does not run Dragon: the error names the key and both values.
+    let wrong = kumi(&[
+        "eval",
+        "whole-body",
+        "dragon",
+        "--policy",
+        policy.to_str().unwrap(),
+        "--rollouts",
+        "1",
+    ]);
+    let err = String::from_utf8_lossy(&wrong.stderr);
+    assert!(!wrong.status.success());
+    assert!(
+        err.contains("kumi.morphology") && err.contains("`minimal`") && err.contains("`dragon`"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&out_dir).unwrap();
 }
 
 #[test]

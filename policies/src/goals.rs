@@ -23,6 +23,12 @@ pub struct GoalDistribution {
     pub centres: Vec<[f64; JOINTS]>,
     /// Half-width [rad] of the uniform joint-angle spread around a centre.
     pub spread_rad: f64,
+    /// Probability that an episode starts at a working configuration (a centre plus the
+    /// spread) with its first goal drawn around the same centre, instead of near zero: the
+    /// upper level's goals start where the module stands, so the skill must learn to hold
+    /// and move from there (without it, a leg started at its home swung its elbow through
+    /// 1.5 rad before coming back, and Tricycle collapsed).
+    pub working_start_weight: f64,
 }
 
 impl GoalDistribution {
@@ -33,13 +39,16 @@ impl GoalDistribution {
             paper_box_weight: 1.0,
             centres: Vec::new(),
             spread_rad: 0.0,
+            working_start_weight: 0.0,
         }
     }
 
-    /// Only the working poses (for evaluating on them alone).
+    /// Only the working poses, every episode from random initial joints near zero (for
+    /// evaluating on them alone, with the paper's protocol).
     pub fn working_only(&self) -> Self {
         Self {
             paper_box_weight: 0.0,
+            working_start_weight: 0.0,
             ..self.clone()
         }
     }
@@ -55,20 +64,59 @@ impl GoalDistribution {
         if self.centres.is_empty() || rng.random::<f64>() < self.paper_box_weight {
             return self.paper_box.sample(rng);
         }
-        let centre = self.centres[rng.random_range(0..self.centres.len())];
-        let q: [f64; JOINTS] = std::array::from_fn(|j| {
+        let centre = rng.random_range(0..self.centres.len());
+        self.sample_around(rng, centre, limits, tool_pose_b)
+    }
+
+    /// Joint angles [rad] within the spread of centre `centre`, clamped to `limits`.
+    fn around<R: Rng + ?Sized>(
+        &self,
+        rng: &mut R,
+        centre: usize,
+        limits: &[(f64, f64); JOINTS],
+    ) -> [f64; JOINTS] {
+        let centre = self.centres[centre];
+        std::array::from_fn(|j| {
             let offset = if self.spread_rad > 0.0 {
                 rng.random_range(-self.spread_rad..self.spread_rad)
             } else {
                 0.0
             };
             (centre[j] + offset).clamp(limits[j].0, limits[j].1)
-        });
-        let pose = tool_pose_b(&q);
+        })
+    }
+
+    /// A working pose around centre `centre` (an index into [`Self::centres`]).
+    pub fn sample_around<R: Rng + ?Sized>(
+        &self,
+        rng: &mut R,
+        centre: usize,
+        limits: &[(f64, f64); JOINTS],
+        tool_pose_b: &dyn Fn(&[f64; JOINTS]) -> Isometry3<f64>,
+    ) -> Goal {
+        let pose = tool_pose_b(&self.around(rng, centre, limits));
         Goal {
             position_b: pose.translation.vector,
             orientation_b: pose.rotation,
         }
+    }
+
+    /// With probability [`Self::working_start_weight`], an episode's start at a working
+    /// configuration: the centre's index and the joint angles. Draws nothing when the weight
+    /// is 0 or there are no centres.
+    pub fn start<R: Rng + ?Sized>(
+        &self,
+        rng: &mut R,
+        limits: &[(f64, f64); JOINTS],
+    ) -> Option<(usize, [f64; JOINTS])> {
+        if self.centres.is_empty() || self.working_start_weight <= 0.0 {
+            return None;
+        }
+        if rng.random::<f64>() >= self.working_start_weight {
+            return None;
+        }
+        let centre = rng.random_range(0..self.centres.len());
+        Some((centre, self.around(rng, centre, limits)))
     }
 }
 

@@ -36,8 +36,13 @@ pub const GOAL_FRAME_TEXT: &str = "arm base frame: origin at the mount face, z a
 
 /// FNV-1a (64 bit) of a text, as 16 hex digits: a stable fingerprint of a training config.
 pub fn fingerprint(text: &str) -> String {
+    fingerprint_bytes(text.as_bytes())
+}
+
+/// FNV-1a (64 bit) of bytes (a policy file), as 16 hex digits.
+pub fn fingerprint_bytes(bytes: &[u8]) -> String {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in text.bytes() {
+    for &b in bytes {
         h ^= u64::from(b);
         h = h.wrapping_mul(0x0000_0100_0000_01b3);
     }

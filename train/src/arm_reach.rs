@@ -77,6 +77,10 @@ pub struct GoalConfig {
     /// Morphologies (shipped names or files) whose arm modules' home angles are the working
     /// configurations.
     pub working_configurations: Vec<String>,
+    /// Probability that an episode starts at a working configuration, its first goal around
+    /// it (see [`GoalDistribution::working_start_weight`]); 0 when absent.
+    #[serde(default)]
+    pub working_start_weight: f64,
 }
 
 impl GoalConfig {
@@ -102,11 +106,12 @@ impl GoalConfig {
     /// The distribution, the working configurations' duplicates removed.
     pub fn resolve(&self) -> Result<GoalDistribution, EnvError> {
         if !(0.0..=1.0).contains(&self.paper_box_weight)
+            || !(0.0..=1.0).contains(&self.working_start_weight)
             || self.spread_rad.is_nan()
             || self.spread_rad < 0.0
         {
             return Err(EnvError::Goals(
-                "paper_box_weight must lie in [0, 1] and spread_rad be >= 0".into(),
+                "paper_box_weight and working_start_weight must lie in [0, 1] and spread_rad be >= 0".into(),
             ));
         }
         let mut centres: Vec<[f64; JOINTS]> = Vec::new();
@@ -124,6 +129,7 @@ impl GoalConfig {
             paper_box_weight: self.paper_box_weight,
             centres,
             spread_rad: self.spread_rad,
+            working_start_weight: self.working_start_weight,
             ..GoalDistribution::paper()
         })
     }
@@ -220,17 +226,21 @@ impl ArmReach {
     /// Starts an episode: random initial joints, a fresh goal. Returns the first observation.
     pub fn reset(&mut self) -> [f32; OBSERVATION_DIM] {
         let r = self.config.initial_joint_range;
-        let q: Vec<f64> = self
-            .actuators
-            .iter()
-            .map(|a| {
-                a.clamp_position(if r > 0.0 {
-                    self.rng.random_range(-r..r)
-                } else {
-                    0.0
+        let start = self.config.goals.start(&mut self.rng, &self.limits);
+        let q: Vec<f64> = match start {
+            Some((_, q)) => q.to_vec(),
+            None => self
+                .actuators
+                .iter()
+                .map(|a| {
+                    a.clamp_position(if r > 0.0 {
+                        self.rng.random_range(-r..r)
+                    } else {
+                        0.0
+                    })
                 })
-            })
-            .collect();
+                .collect(),
+        };
         self.world.reset(&RobotState {
             base_pose_w: Isometry3::identity(),
             joint_positions: q.clone(),
@@ -238,7 +248,17 @@ impl ArmReach {
         self.targets = q;
         self.previous_action = [0.0; JOINTS];
         self.step = 0;
-        self.goal = self.sample_goal();
+        self.goal = match start {
+            Some((centre, _)) => {
+                let kinematics = &self.kinematics;
+                self.config
+                    .goals
+                    .sample_around(&mut self.rng, centre, &self.limits, &|q| {
+                        kinematics.tool_pose_b(q)
+                    })
+            }
+            None => self.sample_goal(),
+        };
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
         self.observation()
     }

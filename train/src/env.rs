@@ -10,9 +10,9 @@ pub struct Transition {
     pub terminated: bool,
     /// The episode hit its time limit (the return is bootstrapped).
     pub truncated: bool,
-    /// Reaching errors at the end of a goal period (position [m], orientation [rad]), if one
-    /// ended at this step: the paper's final errors.
-    pub goal_errors: Option<(f64, f64)>,
+    /// Task-specific figures this step produced, by name (one of the environment's
+    /// [`Environment::metric_names`]): the trainer logs the mean of each over a rollout.
+    pub metrics: Vec<(&'static str, f64)>,
 }
 
 /// An episodic environment with continuous actions.
@@ -23,7 +23,21 @@ pub trait Environment: Send {
     fn reset(&mut self) -> Vec<f32>;
     /// Applies an action. After a terminated or truncated step the trainer calls `reset`.
     fn step(&mut self, action: &[f32]) -> Transition;
+    /// Names of the figures [`Transition::metrics`] may carry, in the order they are logged.
+    fn metric_names(&self) -> &'static [&'static str] {
+        &[]
+    }
 }
+
+/// The arm-reach environment's figures: errors at the end of each goal period.
+pub const REACH_METRICS: [&str; 2] = ["final_position_error_m", "final_orientation_error_rad"];
+/// The whole-body environment's figures: errors at the end of each episode that ran its
+/// time, and the fraction of episodes that ended by a fall.
+pub const BODY_METRICS: [&str; 3] = [
+    "final_position_error_m",
+    "final_yaw_error_rad",
+    "termination_rate",
+];
 
 impl Environment for crate::arm_reach::ArmReach {
     fn observation_dim(&self) -> usize {
@@ -47,9 +61,55 @@ impl Environment for crate::arm_reach::ArmReach {
             reward: o.reward,
             terminated: false,
             truncated: o.truncated,
-            goal_errors: o
-                .goal_ended
-                .then_some((o.position_error, o.orientation_error)),
+            metrics: if o.goal_ended {
+                vec![
+                    (REACH_METRICS[0], o.position_error),
+                    (REACH_METRICS[1], o.orientation_error),
+                ]
+            } else {
+                Vec::new()
+            },
         }
+    }
+
+    fn metric_names(&self) -> &'static [&'static str] {
+        &REACH_METRICS
+    }
+}
+
+impl Environment for crate::whole_body::WholeBody {
+    fn observation_dim(&self) -> usize {
+        crate::whole_body::WholeBody::observation_dim(self)
+    }
+
+    fn action_dim(&self) -> usize {
+        self.terms().size()
+    }
+
+    fn reset(&mut self) -> Vec<f32> {
+        crate::whole_body::WholeBody::reset(self)
+    }
+
+    fn step(&mut self, action: &[f32]) -> Transition {
+        let o = crate::whole_body::WholeBody::step(self, action);
+        let mut metrics = Vec::new();
+        if o.terminated || o.truncated {
+            metrics.push((BODY_METRICS[2], f64::from(u8::from(o.terminated))));
+        }
+        if o.truncated && !o.terminated {
+            metrics.push((BODY_METRICS[0], o.position_error));
+            metrics.push((BODY_METRICS[1], o.yaw_error));
+        }
+        Transition {
+            observation: o.observation,
+            reward: o.reward,
+            terminated: o.terminated,
+            truncated: o.truncated,
+            metrics,
+        }
+    }
+
+    fn metric_names(&self) -> &'static [&'static str] {
+        &BODY_METRICS
     }
 }

@@ -5,9 +5,12 @@
 //! - [`arm_reach`]: the low-level environment, one fixed-base arm module reaching goals.
 
 pub mod arm_reach;
+pub mod body_reward;
 pub mod env;
 pub mod evaluate;
+pub mod evaluate_body;
 pub mod export;
 pub mod nn;
 pub mod ppo;
 pub mod reward;
+pub mod whole_body;

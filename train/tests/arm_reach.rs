@@ -141,6 +141,7 @@ fn working_poses_are_the_home_tool_poses_of_every_shipped_arm_module() {
         paper_box_weight: 0.0,
         spread_rad,
         working_configurations: vec!["minimal".into(), "dragon".into(), "tricycle".into()],
+        working_start_weight: 0.0,
     };
     let goals = config(0.0).resolve().unwrap();
     // The manipulators of the three robots share one home; Dragon's second arm stands straight;
@@ -190,4 +191,42 @@ fn working_poses_are_the_home_tool_poses_of_every_shipped_arm_module() {
         .unwrap_err()
         .to_string()
         .contains("no-such-robot"));
+}
+
+#[test]
+fn working_starts_begin_at_a_module_home_with_the_first_goal_around_it() {
+    use kumi_policies::kinematics::ToolKinematics;
+    use kumi_train::arm_reach::GoalConfig;
+    let goals = GoalConfig {
+        paper_box_weight: 0.0,
+        spread_rad: 0.0,
+        working_configurations: vec!["tricycle".into()],
+        working_start_weight: 1.0,
+    }
+    .resolve()
+    .unwrap();
+    let arm = model("arm");
+    let fk = ToolKinematics::new(&arm, &arm.modules[0]).unwrap();
+    let mut e = ArmReach::new(
+        arm.clone(),
+        ArmReachConfig {
+            goals: goals.clone(),
+            ..ArmReachConfig::default()
+        },
+        4,
+    )
+    .unwrap();
+    for _ in 0..20 {
+        let obs = e.reset();
+        // No spread: the episode starts exactly at one centre and its goal is that centre's
+        // home tool pose, so the skill starts on its goal.
+        let q: [f64; 7] = std::array::from_fn(|j| f64::from(obs[j]));
+        let centre = goals
+            .centres
+            .iter()
+            .find(|c| c.iter().zip(&q).all(|(a, b)| (a - b).abs() < 1e-5))
+            .unwrap_or_else(|| panic!("start {q:?} is no centre"));
+        let home = fk.tool_pose_b(centre).translation.vector;
+        assert!((e.goal().position_b - home).norm() < 1e-9);
+    }
 }

@@ -37,7 +37,7 @@ impl Environment for PointReach {
             reward: -f64::from((self.x - self.target).abs()),
             terminated: false,
             truncated: self.t >= 20,
-            goal_errors: None,
+            metrics: Vec::new(),
         }
     }
 }

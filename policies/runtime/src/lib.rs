@@ -16,7 +16,7 @@ mod tract;
 
 pub use model_file::{ModelFile, TensorShape};
 pub use onnxruntime::{ort_library_from_env, ORT_DYLIB_PATH};
-pub use policy::{Backend, BackendChoice, RuntimeError, SkillPolicy};
+pub use policy::{Backend, BackendChoice, Network, RuntimeError, SkillPolicy, WholeBodyPolicy};
 
 /// The shipped low-level skill, `policies/arm_reach.onnx` in the source tree.
 pub fn shipped_arm_policy() -> std::path::PathBuf {
@@ -25,4 +25,10 @@ pub fn shipped_arm_policy() -> std::path::PathBuf {
         .parent()
         .unwrap_or(runtime_crate)
         .join("arm_reach.onnx")
+}
+
+/// The shipped whole-body policy of a robot, `policies/<robot>_whole_body.onnx` in the source
+/// tree.
+pub fn shipped_whole_body_policy(robot: &str) -> std::path::PathBuf {
+    shipped_arm_policy().with_file_name(format!("{robot}_whole_body.onnx"))
 }

@@ -68,8 +68,8 @@ impl OrtEngine {
 }
 
 impl Infer for OrtEngine {
-    fn infer(&mut self, observation: &[f32]) -> Result<Vec<f32>, String> {
-        let input = TensorRef::from_array_view(([1usize, self.input_dim], observation))
+    fn infer(&mut self, input: &[f32], rows: usize) -> Result<Vec<f32>, String> {
+        let input = TensorRef::from_array_view(([rows, self.input_dim], input))
             .map_err(|e| e.to_string())?;
         let outputs = self
             .session

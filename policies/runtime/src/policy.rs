@@ -7,14 +7,15 @@ use std::str::FromStr;
 
 use kumi_policies::observation::{JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::{ArmSkill, MetadataMismatch};
+use kumi_terms::contract::ContractMismatch;
 
 use crate::model_file::{ModelFile, TensorShape};
 use crate::onnxruntime::{ort_library_from_env, OrtEngine};
 use crate::tract::TractEngine;
 
-/// One inference engine: an observation in, the raw policy output out.
+/// One inference engine: `rows` observations in (row-major), the raw outputs out.
 pub(crate) trait Infer: Send {
-    fn infer(&mut self, observation: &[f32]) -> Result<Vec<f32>, String>;
+    fn infer(&mut self, input: &[f32], rows: usize) -> Result<Vec<f32>, String>;
 }
 
 /// The engine that runs a policy.
@@ -86,7 +87,12 @@ pub enum RuntimeError {
         module: String,
         source: Box<MetadataMismatch>,
     },
-    #[error("{path}: {what} has shape {found}, the arm skill needs {expected}")]
+    #[error("{path}: does not fit this robot and skill: {source}")]
+    Contract {
+        path: String,
+        source: Box<ContractMismatch>,
+    },
+    #[error("{path}: {what} has shape {found}, the policy's contract needs {expected}")]
     Shape {
         path: String,
         what: &'static str,
@@ -101,8 +107,10 @@ pub enum RuntimeError {
     },
     #[error("{backend} inference failed: {message}")]
     Infer { backend: Backend, message: String },
-    #[error("the policy returned {found} values, not {JOINTS}")]
-    OutputSize { found: usize },
+    #[error("the policy returned {found} values, not {expected}")]
+    OutputSize { found: usize, expected: usize },
+    #[error("{found} input values are not whole rows of {width}")]
+    InputSize { found: usize, width: usize },
 }
 
 fn describe(shape: &TensorShape) -> String {
@@ -118,7 +126,12 @@ fn fits(shape: &TensorShape, width: usize) -> bool {
     shape.len() == 2 && matches!(shape[0], None | Some(1)) && shape[1] == Some(width as i64)
 }
 
-fn check_shapes(path: &str, file: &ModelFile) -> Result<(), RuntimeError> {
+fn check_shapes(
+    path: &str,
+    file: &ModelFile,
+    input_dim: usize,
+    output_dim: usize,
+) -> Result<(), RuntimeError> {
     let one = |what: &'static str, list: &[(String, TensorShape)], width: usize| {
         let found = match list {
             [(_, shape)] if fits(shape, width) => return Ok(()),
@@ -132,66 +145,60 @@ fn check_shapes(path: &str, file: &ModelFile) -> Result<(), RuntimeError> {
             expected: format!("one tensor [batch, {width}]"),
         })
     };
-    one("the input", &file.inputs, OBSERVATION_DIM)?;
-    one("the output", &file.outputs, JOINTS)
+    one("the input", &file.inputs, input_dim)?;
+    one("the output", &file.outputs, output_dim)
 }
 
-/// A low-level skill policy ready to drive one arm module.
-pub struct SkillPolicy {
+/// A checked ONNX network on one backend: rows of `input_dim` values in, rows of
+/// `output_dim` out.
+pub struct Network {
     backend: Backend,
     engine: Box<dyn Infer>,
     metadata: BTreeMap<String, String>,
+    input_dim: usize,
+    output_dim: usize,
 }
 
-impl fmt::Debug for SkillPolicy {
+impl fmt::Debug for Network {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("SkillPolicy")
+        f.debug_struct("Network")
             .field("backend", &self.backend)
             .field("metadata", &self.metadata)
             .finish_non_exhaustive()
     }
 }
 
-impl SkillPolicy {
-    /// Loads the ONNX policy at `path` to drive the module `skill` describes.
-    pub fn load(
-        path: &Path,
-        skill: &ArmSkill,
-        choice: BackendChoice,
-    ) -> Result<Self, RuntimeError> {
-        let label = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|source| RuntimeError::Read {
-            path: label.clone(),
-            source,
-        })?;
-        Self::from_bytes(bytes, &label, skill, choice)
-    }
+fn read(path: &Path) -> Result<Vec<u8>, RuntimeError> {
+    std::fs::read(path).map_err(|source| RuntimeError::Read {
+        path: path.display().to_string(),
+        source,
+    })
+}
 
-    /// As [`Self::load`], from the file's bytes; `label` names it in errors.
-    pub fn from_bytes(
-        bytes: Vec<u8>,
+fn decode(bytes: Vec<u8>, label: &str) -> Result<ModelFile, RuntimeError> {
+    ModelFile::decode(bytes).map_err(|message| RuntimeError::Decode {
+        path: label.to_string(),
+        message,
+    })
+}
+
+impl Network {
+    /// The network of a decoded file whose metadata has been checked: its shapes must be
+    /// `[batch, input_dim]` and `[batch, output_dim]`.
+    fn new(
+        file: ModelFile,
         label: &str,
-        skill: &ArmSkill,
         choice: BackendChoice,
+        input_dim: usize,
+        output_dim: usize,
     ) -> Result<Self, RuntimeError> {
-        let file = ModelFile::decode(bytes).map_err(|message| RuntimeError::Decode {
-            path: label.to_string(),
-            message,
-        })?;
-        skill
-            .check(&file.metadata)
-            .map_err(|source| RuntimeError::Metadata {
-                path: label.to_string(),
-                module: skill.module.clone(),
-                source: Box::new(source),
-            })?;
-        check_shapes(label, &file)?;
+        check_shapes(label, &file, input_dim, output_dim)?;
         let backend = choice.resolve();
         let engine: Box<dyn Infer> = match backend {
             Backend::OnnxRuntime => {
-                OrtEngine::new(&file.bytes, OBSERVATION_DIM).map(|e| Box::new(e) as Box<dyn Infer>)
+                OrtEngine::new(&file.bytes, input_dim).map(|e| Box::new(e) as Box<dyn Infer>)
             }
-            Backend::Tract => TractEngine::new(&file.bytes, OBSERVATION_DIM)
+            Backend::Tract => TractEngine::new(&file.bytes, input_dim)
                 .map(|e| Box::new(e) as Box<dyn Infer>)
                 .map_err(|e| e.to_string()),
         }
@@ -204,25 +211,34 @@ impl SkillPolicy {
             backend,
             engine,
             metadata: file.metadata,
+            input_dim,
+            output_dim,
         })
     }
 
-    /// The policy's action (7 values, to be clipped and scaled by
-    /// [`ArmSkill::increments`]) for one observation.
-    pub fn act(
-        &mut self,
-        observation: &[f32; OBSERVATION_DIM],
-    ) -> Result<[f32; JOINTS], RuntimeError> {
+    /// The outputs for whole rows of inputs, row-major.
+    pub fn run(&mut self, input: &[f32]) -> Result<Vec<f32>, RuntimeError> {
+        if input.is_empty() || !input.len().is_multiple_of(self.input_dim) {
+            return Err(RuntimeError::InputSize {
+                found: input.len(),
+                width: self.input_dim,
+            });
+        }
+        let rows = input.len() / self.input_dim;
         let out = self
             .engine
-            .infer(observation)
+            .infer(input, rows)
             .map_err(|message| RuntimeError::Infer {
                 backend: self.backend,
                 message,
             })?;
-        out.as_slice()
-            .try_into()
-            .map_err(|_| RuntimeError::OutputSize { found: out.len() })
+        if out.len() != rows * self.output_dim {
+            return Err(RuntimeError::OutputSize {
+                found: out.len(),
+                expected: rows * self.output_dim,
+            });
+        }
+        Ok(out)
     }
 
     pub fn backend(&self) -> Backend {
@@ -232,5 +248,134 @@ impl SkillPolicy {
     /// The file's `metadata_props`.
     pub fn metadata(&self) -> &BTreeMap<String, String> {
         &self.metadata
+    }
+}
+
+/// A low-level skill policy ready to drive one arm module.
+#[derive(Debug)]
+pub struct SkillPolicy {
+    net: Network,
+}
+
+impl SkillPolicy {
+    /// Loads the ONNX policy at `path` to drive the module `skill` describes.
+    pub fn load(
+        path: &Path,
+        skill: &ArmSkill,
+        choice: BackendChoice,
+    ) -> Result<Self, RuntimeError> {
+        Self::from_bytes(read(path)?, &path.display().to_string(), skill, choice)
+    }
+
+    /// As [`Self::load`], from the file's bytes; `label` names it in errors.
+    pub fn from_bytes(
+        bytes: Vec<u8>,
+        label: &str,
+        skill: &ArmSkill,
+        choice: BackendChoice,
+    ) -> Result<Self, RuntimeError> {
+        let file = decode(bytes, label)?;
+        skill
+            .check(&file.metadata)
+            .map_err(|source| RuntimeError::Metadata {
+                path: label.to_string(),
+                module: skill.module.clone(),
+                source: Box::new(source),
+            })?;
+        Ok(Self {
+            net: Network::new(file, label, choice, OBSERVATION_DIM, JOINTS)?,
+        })
+    }
+
+    /// The policy's action (7 values, to be clipped and scaled by
+    /// [`ArmSkill::increments`]) for one observation.
+    pub fn act(
+        &mut self,
+        observation: &[f32; OBSERVATION_DIM],
+    ) -> Result<[f32; JOINTS], RuntimeError> {
+        let out = self.net.run(observation)?;
+        Ok(std::array::from_fn(|j| out[j]))
+    }
+
+    /// The actions for several observations at once (several arm modules or environments),
+    /// in one inference.
+    pub fn act_batch(
+        &mut self,
+        observations: &[[f32; OBSERVATION_DIM]],
+    ) -> Result<Vec<[f32; JOINTS]>, RuntimeError> {
+        let out = self.net.run(observations.as_flattened())?;
+        Ok(out
+            .chunks_exact(JOINTS)
+            .map(|row| std::array::from_fn(|j| row[j]))
+            .collect())
+    }
+
+    pub fn backend(&self) -> Backend {
+        self.net.backend()
+    }
+
+    /// The file's `metadata_props`.
+    pub fn metadata(&self) -> &BTreeMap<String, String> {
+        self.net.metadata()
+    }
+}
+
+/// A whole-body (upper-level) policy, checked against the contract of the robot and skill it
+/// will run with ([`kumi_terms::contract::contract`]).
+#[derive(Debug)]
+pub struct WholeBodyPolicy {
+    net: Network,
+}
+
+impl WholeBodyPolicy {
+    /// Loads the ONNX policy at `path`; its metadata must match `expected` key by key.
+    pub fn load(
+        path: &Path,
+        expected: &BTreeMap<String, String>,
+        choice: BackendChoice,
+    ) -> Result<Self, RuntimeError> {
+        Self::from_bytes(read(path)?, &path.display().to_string(), expected, choice)
+    }
+
+    /// As [`Self::load`], from the file's bytes; `label` names it in errors.
+    pub fn from_bytes(
+        bytes: Vec<u8>,
+        label: &str,
+        expected: &BTreeMap<String, String>,
+        choice: BackendChoice,
+    ) -> Result<Self, RuntimeError> {
+        let file = decode(bytes, label)?;
+        kumi_terms::contract::check(expected, &file.metadata).map_err(|source| {
+            RuntimeError::Contract {
+                path: label.to_string(),
+                source: Box::new(source),
+            }
+        })?;
+        let dim = |key: &str| {
+            expected
+                .get(key)
+                .and_then(|v| v.parse::<usize>().ok())
+                .unwrap_or(0)
+        };
+        let (input, output) = (
+            dim(kumi_policies::metadata::OBSERVATION_DIM_KEY),
+            dim(kumi_policies::metadata::ACTION_DIM_KEY),
+        );
+        Ok(Self {
+            net: Network::new(file, label, choice, input, output)?,
+        })
+    }
+
+    /// The actions for rows of observations (one row per robot), row-major.
+    pub fn act(&mut self, observations: &[f32]) -> Result<Vec<f32>, RuntimeError> {
+        self.net.run(observations)
+    }
+
+    pub fn backend(&self) -> Backend {
+        self.net.backend()
+    }
+
+    pub fn metadata(&self) -> &BTreeMap<String, String> {
+        self.net.metadata()
     }
 }

@@ -132,11 +132,13 @@ pub struct IterationStats {
     pub update_samples_per_s: f64,
     /// Mean reward per step in this rollout.
     pub mean_step_reward: f64,
+    /// Episodes that ended in this rollout.
+    pub episodes: usize,
     /// Mean return of the episodes that ended in this rollout (NaN if none).
     pub mean_episode_return: f64,
-    /// Mean final position [m] and orientation [rad] errors of goals that ended (NaN if none).
-    pub final_position_error: f64,
-    pub final_orientation_error: f64,
+    /// The environment's own figures ([`Environment::metric_names`]), each the mean over the
+    /// rollout of the values its steps reported (NaN if none did).
+    pub metrics: Vec<(&'static str, f64)>,
     pub policy_loss: f64,
     pub value_loss: f64,
     pub entropy: f64,
@@ -232,8 +234,8 @@ struct Rollout {
     terminated: Vec<bool>,
     ended: Vec<bool>,
     episode_returns: Vec<f64>,
-    position_errors: Vec<f64>,
-    orientation_errors: Vec<f64>,
+    /// Per metric name: sum and count.
+    metrics: std::collections::HashMap<&'static str, (f64, usize)>,
     seconds: f64,
 }
 
@@ -420,8 +422,7 @@ impl<E: Environment> Trainer<E> {
             terminated: Vec::with_capacity(n * steps),
             ended: Vec::with_capacity(n * steps),
             episode_returns: Vec::new(),
-            position_errors: Vec::new(),
-            orientation_errors: Vec::new(),
+            metrics: Default::default(),
             seconds: 0.0,
         };
         let start = Instant::now();
@@ -445,9 +446,10 @@ impl<E: Environment> Trainer<E> {
                 r.terminated.push(tr.terminated);
                 r.ended.push(tr.terminated || tr.truncated);
                 self.episode_returns[i] += tr.reward;
-                if let Some((p, o)) = tr.goal_errors {
-                    r.position_errors.push(p);
-                    r.orientation_errors.push(o);
+                for (name, value) in &tr.metrics {
+                    let entry = r.metrics.entry(name).or_default();
+                    entry.0 += value;
+                    entry.1 += 1;
                 }
                 let next = if tr.terminated || tr.truncated {
                     r.episode_returns
@@ -522,9 +524,16 @@ impl<E: Environment> Trainer<E> {
             update_samples_per_s: total as f64 / update_s,
             mean_step_reward: rollout.rewards.iter().map(|r| f64::from(*r)).sum::<f64>()
                 / total as f64,
+            episodes: rollout.episode_returns.len(),
             mean_episode_return: mean(&rollout.episode_returns),
-            final_position_error: mean(&rollout.position_errors),
-            final_orientation_error: mean(&rollout.orientation_errors),
+            metrics: self.envs[0]
+                .metric_names()
+                .iter()
+                .map(|name| {
+                    let (sum, n) = rollout.metrics.get(name).copied().unwrap_or_default();
+                    (*name, if n == 0 { f64::NAN } else { sum / n as f64 })
+                })
+                .collect(),
             policy_loss: loss.policy,
             value_loss: loss.value,
             entropy: loss.entropy,

@@ -1,0 +1,336 @@
+//! Action terms: how the upper policy's action vector becomes commands for the modules.
+//!
+//! The action is laid out module by module in the morphology's order: an arm module takes a
+//! goal for the frozen reaching skill (a manipulator 6 values: position and rotation; a leg 4:
+//! position and roll about its tool's x axis), a wheel module one velocity for both wheels, a
+//! passive body nothing. Every value is clipped to [-1, 1] (a non-finite one counts as 0) and
+//! scaled: goals are bounded offsets around the module's home tool pose, in the module's base
+//! frame (the frame the skill was trained in); a wheel's velocity is scaled by its limit.
+
+use kumi_model::{ActuatorMode, ModuleInstance, RobotModel, Role};
+use kumi_policies::kinematics::ToolKinematics;
+use kumi_policies::observation::{Goal, JOINTS};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+
+/// How far goals may move from each arm module's home tool pose (for an action of 1).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct GoalBounds {
+    /// Manipulator: largest position offset along each base-frame axis [m].
+    pub manipulator_position_m: f64,
+    /// Manipulator: largest component of the rotation vector [rad] that turns the home tool
+    /// orientation (applied in the module's base frame).
+    pub manipulator_rotation_rad: f64,
+    /// Leg: largest position offset along each base-frame axis [m].
+    pub leg_position_m: f64,
+    /// Leg: largest roll [rad] about the tool's own x axis.
+    pub leg_roll_rad: f64,
+}
+
+impl GoalBounds {
+    fn check(&self) -> Result<(), TermError> {
+        let all = [
+            ("manipulator_position_m", self.manipulator_position_m),
+            ("manipulator_rotation_rad", self.manipulator_rotation_rad),
+            ("leg_position_m", self.leg_position_m),
+            ("leg_roll_rad", self.leg_roll_rad),
+        ];
+        match all.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
+            Some((name, value)) => Err(TermError::Bound {
+                name,
+                value: *value,
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TermError {
+    #[error("goal bound `{name}` must be finite and >= 0, not {value}")]
+    Bound { name: &'static str, value: f64 },
+    #[error("module `{module}`: {message}")]
+    Module { module: String, message: String },
+    #[error("the action has {found} values, the morphology's terms take {expected}")]
+    Size { expected: usize, found: usize },
+    #[error("robot `{0}` has no arm or wheel module: nothing for a whole-body policy to command")]
+    Empty(String),
+}
+
+/// Clips to [-1, 1]; a non-finite value becomes 0 (hold the home goal, stop the wheel).
+pub fn clip(a: f32) -> f64 {
+    let a = f64::from(a);
+    if a.is_finite() {
+        a.clamp(-1.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// The frozen skill's goal for one arm module.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmGoalTerm {
+    pub module: String,
+    /// [`Role::Manipulator`] (6 values) or [`Role::Leg`] (4 values).
+    pub role: Role,
+    /// The tool pose at the module's home joint angles, in the module's base frame.
+    pub home_tool_b: Isometry3<f64>,
+    /// Position offset for an action of 1 [m].
+    pub position_scale_m: f64,
+    /// Rotation for an action of 1 [rad].
+    pub rotation_scale_rad: f64,
+}
+
+impl ArmGoalTerm {
+    /// The term for an arm module of `model`; its home tool pose by forward kinematics.
+    pub fn new(
+        model: &RobotModel,
+        module: &ModuleInstance,
+        bounds: &GoalBounds,
+    ) -> Result<Self, TermError> {
+        let fail = |message: String| TermError::Module {
+            module: module.name.clone(),
+            message,
+        };
+        if module.home.len() != JOINTS {
+            return Err(fail(format!(
+                "{} home angles, an arm module has {JOINTS}",
+                module.home.len()
+            )));
+        }
+        let kinematics = ToolKinematics::new(model, module).map_err(fail)?;
+        let home: [f64; JOINTS] = std::array::from_fn(|j| module.home[j]);
+        let (position_scale_m, rotation_scale_rad) = match module.role {
+            Role::Manipulator => (
+                bounds.manipulator_position_m,
+                bounds.manipulator_rotation_rad,
+            ),
+            _ => (bounds.leg_position_m, bounds.leg_roll_rad),
+        };
+        Ok(Self {
+            module: module.name.clone(),
+            role: if module.role == Role::Manipulator {
+                Role::Manipulator
+            } else {
+                Role::Leg
+            },
+            home_tool_b: kinematics.tool_pose_b(&home),
+            position_scale_m,
+            rotation_scale_rad,
+        })
+    }
+
+    /// Action values this term takes: 6 for the manipulator, 4 for a leg.
+    pub fn width(&self) -> usize {
+        if self.role == Role::Manipulator {
+            6
+        } else {
+            4
+        }
+    }
+
+    /// Names of this term's action values, in order.
+    pub fn value_names(&self) -> &'static [&'static str] {
+        if self.role == Role::Manipulator {
+            &["dx", "dy", "dz", "rx", "ry", "rz"]
+        } else {
+            &["dx", "dy", "dz", "roll"]
+        }
+    }
+
+    /// The goal in the module's base frame for this term's `action` values (`width()` of
+    /// them): home position plus the scaled offset; home orientation turned by the scaled
+    /// rotation vector (manipulator, base frame) or rolled about the tool's x axis (leg).
+    pub fn goal(&self, action: &[f32]) -> Goal {
+        let a = |i: usize| clip(action[i]);
+        let offset = Vector3::new(a(0), a(1), a(2)) * self.position_scale_m;
+        let home = self.home_tool_b.rotation;
+        let orientation_b = if self.role == Role::Manipulator {
+            let r = Vector3::new(a(3), a(4), a(5)) * self.rotation_scale_rad;
+            UnitQuaternion::from_scaled_axis(r) * home
+        } else {
+            home * UnitQuaternion::from_axis_angle(
+                &Vector3::x_axis(),
+                a(3) * self.rotation_scale_rad,
+            )
+        };
+        Goal {
+            position_b: self.home_tool_b.translation.vector + offset,
+            orientation_b,
+        }
+    }
+}
+
+/// One velocity for both wheels of a wheel module.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WheelTerm {
+    pub module: String,
+    /// Wheel velocity for an action of 1 [rad/s]: the wheels' velocity limit.
+    pub scale_rad_s: f64,
+    /// Wheels of the module (velocity joints).
+    pub wheels: usize,
+}
+
+impl WheelTerm {
+    /// The wheel velocity [rad/s] for one action value.
+    pub fn velocity(&self, action: f32) -> f64 {
+        clip(action) * self.scale_rad_s
+    }
+}
+
+/// One module's term.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Term {
+    Arm(ArmGoalTerm),
+    Wheel(WheelTerm),
+}
+
+impl Term {
+    pub fn module(&self) -> &str {
+        match self {
+            Term::Arm(t) => &t.module,
+            Term::Wheel(t) => &t.module,
+        }
+    }
+
+    pub fn width(&self) -> usize {
+        match self {
+            Term::Arm(t) => t.width(),
+            Term::Wheel(_) => 1,
+        }
+    }
+}
+
+/// What one action commands: a goal per arm module and a velocity per wheel module, each in
+/// the order of [`ActionTerms::arms`] and [`ActionTerms::wheels`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Commands {
+    pub goals: Vec<Goal>,
+    pub wheel_velocities: Vec<f64>,
+}
+
+/// Every module's term, in the morphology's module order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ActionTerms {
+    pub terms: Vec<Term>,
+}
+
+impl ActionTerms {
+    /// The terms of every arm and wheel module of `model`.
+    pub fn new(model: &RobotModel, bounds: &GoalBounds) -> Result<Self, TermError> {
+        bounds.check()?;
+        let mut terms = Vec::new();
+        for module in &model.modules {
+            let positions = module.position_joints().count();
+            let wheels = module.velocity_joints().count();
+            if positions == JOINTS && wheels == 0 && module.ee_link.is_some() {
+                terms.push(Term::Arm(ArmGoalTerm::new(model, module, bounds)?));
+            } else if wheels > 0 && positions == 0 {
+                let limit = module
+                    .actuators
+                    .iter()
+                    .filter(|a| a.mode == ActuatorMode::Velocity)
+                    .map(|a| a.velocity_limit)
+                    .fold(f64::INFINITY, f64::min);
+                terms.push(Term::Wheel(WheelTerm {
+                    module: module.name.clone(),
+                    scale_rad_s: limit,
+                    wheels,
+                }));
+            } else if positions + wheels > 0 {
+                return Err(TermError::Module {
+                    module: module.name.clone(),
+                    message: format!("{positions} position and {wheels} velocity joints: neither an arm module ({JOINTS} position joints and a tool) nor a wheel module"),
+                });
+            }
+        }
+        if terms.is_empty() {
+            return Err(TermError::Empty(model.name.clone()));
+        }
+        Ok(Self { terms })
+    }
+
+    /// Length of the action vector.
+    pub fn size(&self) -> usize {
+        self.terms.iter().map(Term::width).sum()
+    }
+
+    pub fn arms(&self) -> impl Iterator<Item = &ArmGoalTerm> {
+        self.terms.iter().filter_map(|t| match t {
+            Term::Arm(a) => Some(a),
+            Term::Wheel(_) => None,
+        })
+    }
+
+    pub fn wheels(&self) -> impl Iterator<Item = &WheelTerm> {
+        self.terms.iter().filter_map(|t| match t {
+            Term::Wheel(w) => Some(w),
+            Term::Arm(_) => None,
+        })
+    }
+
+    /// The commands for one action vector of [`Self::size`] values.
+    pub fn commands(&self, action: &[f32]) -> Result<Commands, TermError> {
+        if action.len() != self.size() {
+            return Err(TermError::Size {
+                expected: self.size(),
+                found: action.len(),
+            });
+        }
+        let mut commands = Commands {
+            goals: Vec::new(),
+            wheel_velocities: Vec::new(),
+        };
+        let mut at = 0;
+        for term in &self.terms {
+            let values = &action[at..at + term.width()];
+            match term {
+                Term::Arm(t) => commands.goals.push(t.goal(values)),
+                Term::Wheel(t) => commands.wheel_velocities.push(t.velocity(values[0])),
+            }
+            at += term.width();
+        }
+        Ok(commands)
+    }
+
+    /// Every action value's name (`arm0/dx`, `leg1/roll`, `wheel0/velocity`), in order.
+    pub fn names(&self) -> Vec<String> {
+        let mut names = Vec::new();
+        for term in &self.terms {
+            match term {
+                Term::Arm(t) => {
+                    names.extend(t.value_names().iter().map(|v| format!("{}/{v}", t.module)))
+                }
+                Term::Wheel(t) => names.push(format!("{}/velocity", t.module)),
+            }
+        }
+        names
+    }
+
+    /// The terms in one line, for a policy's metadata: per module its name, role, width and
+    /// scales (`arm0:manipulator:6:position_m=0.25:rotation_rad=0.5;wheel0:wheel:1:velocity_rad_s=8`).
+    pub fn describe(&self) -> String {
+        self.terms
+            .iter()
+            .map(|term| match term {
+                Term::Arm(t) => format!(
+                    "{}:{}:{}:position_m={}:{}={}",
+                    t.module,
+                    t.role,
+                    t.width(),
+                    t.position_scale_m,
+                    if t.role == Role::Manipulator {
+                        "rotation_rad"
+                    } else {
+                        "roll_rad"
+                    },
+                    t.rotation_scale_rad
+                ),
+                Term::Wheel(t) => {
+                    format!("{}:wheel:1:velocity_rad_s={}", t.module, t.scale_rad_s)
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(";")
+    }
+}

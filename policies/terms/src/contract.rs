@@ -1,0 +1,111 @@
+//! The contract an exported whole-body policy carries in its ONNX `metadata_props`, and the
+//! check that it fits the morphology and the skill it is asked to run with. A mismatch names
+//! the key and both values.
+
+use std::collections::BTreeMap;
+
+use kumi_model::RobotModel;
+use kumi_policies::metadata;
+
+use crate::action::ActionTerms;
+use crate::observation;
+
+/// Format tag of a whole-body policy.
+pub const WHOLE_BODY_FORMAT: &str = "kumi-policy/whole-body/1";
+
+pub const MORPHOLOGY: &str = "kumi.morphology";
+/// Fingerprint of the assembled robot (URDF, module roles and home angles).
+pub const MORPHOLOGY_FINGERPRINT: &str = "kumi.morphology_fingerprint";
+/// Fingerprint of the frozen skill's ONNX file the policy was trained over.
+pub const SKILL_FINGERPRINT: &str = "kumi.skill_fingerprint";
+/// The action terms ([`ActionTerms::describe`]).
+pub const ACTION: &str = "kumi.action";
+
+/// The keys a policy must match, in the order they are checked (the first mismatch is the
+/// root cause: a foreign file fails on its format, another robot on its morphology).
+pub const CONTRACT_KEYS: [&str; 9] = [
+    metadata::FORMAT,
+    MORPHOLOGY,
+    MORPHOLOGY_FINGERPRINT,
+    SKILL_FINGERPRINT,
+    metadata::OBSERVATION_DIM_KEY,
+    metadata::ACTION_DIM_KEY,
+    metadata::OBSERVATION,
+    ACTION,
+    metadata::CONTROL_HZ,
+];
+
+/// A policy that does not fit.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ContractMismatch {
+    #[error(
+        "metadata `{key}` is missing: not a kumi whole-body policy, or exported by an older kumi"
+    )]
+    Missing { key: &'static str },
+    #[error("metadata `{key}` is `{found}`, but this robot and skill need `{expected}`")]
+    Differs {
+        key: &'static str,
+        found: String,
+        expected: String,
+    },
+}
+
+/// A robot's fingerprint: its URDF and each module's name, role and home angles.
+pub fn morphology_fingerprint(model: &RobotModel) -> String {
+    let mut text = model.urdf_xml();
+    for m in &model.modules {
+        text.push_str(&format!("\n{}:{}:{:?}", m.name, m.role, m.home));
+    }
+    metadata::fingerprint(&text)
+}
+
+/// What a whole-body policy for `model`, its `terms`, the skill file `skill_onnx` (its bytes)
+/// and `control_hz` must carry.
+pub fn contract(
+    model: &RobotModel,
+    terms: &ActionTerms,
+    skill_onnx: &[u8],
+    control_hz: f64,
+) -> BTreeMap<String, String> {
+    let wheels = terms.wheels().map(|w| w.wheels).sum();
+    let slots = observation::slots(wheels, terms.size());
+    [
+        (metadata::FORMAT, WHOLE_BODY_FORMAT.to_string()),
+        (MORPHOLOGY, model.name.clone()),
+        (MORPHOLOGY_FINGERPRINT, morphology_fingerprint(model)),
+        (SKILL_FINGERPRINT, metadata::fingerprint_bytes(skill_onnx)),
+        (
+            metadata::OBSERVATION_DIM_KEY,
+            observation::size(&slots).to_string(),
+        ),
+        (metadata::ACTION_DIM_KEY, terms.size().to_string()),
+        (metadata::OBSERVATION, observation::describe(&slots)),
+        (ACTION, terms.describe()),
+        (metadata::CONTROL_HZ, control_hz.to_string()),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect()
+}
+
+/// Checks a policy's metadata against the contract `expected` ([`contract`]).
+pub fn check(
+    expected: &BTreeMap<String, String>,
+    found: &BTreeMap<String, String>,
+) -> Result<(), ContractMismatch> {
+    for key in CONTRACT_KEYS {
+        let want = expected.get(key).map(String::as_str).unwrap_or_default();
+        match found.get(key) {
+            None => return Err(ContractMismatch::Missing { key }),
+            Some(v) if v != want => {
+                return Err(ContractMismatch::Differs {
+                    key,
+                    found: v.clone(),
+                    expected: want.to_string(),
+                })
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(())
+}

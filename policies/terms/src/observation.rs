@@ -1,0 +1,189 @@
+//! The whole-body observation (the paper's Table III): base linear velocity, projected
+//! gravity, the tool-to-target position and yaw error, the wheels' angular velocities and the
+//! previous action. Every slot is named with its size, unit and frame; values are rounded to
+//! f32 here, once, for training and deployment alike.
+
+use std::f64::consts::PI;
+
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+
+/// One named part of the observation.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ObservationSlot {
+    pub name: &'static str,
+    pub size: usize,
+    pub unit: &'static str,
+    pub frame: &'static str,
+}
+
+/// The slots, in order, for a robot with `wheels` wheel joints and an action of `action_size`.
+pub fn slots(wheels: usize, action_size: usize) -> Vec<ObservationSlot> {
+    let slot = |name, size, unit, frame| ObservationSlot {
+        name,
+        size,
+        unit,
+        frame,
+    };
+    vec![
+        slot("base_linear_velocity", 3, "m/s", "base"),
+        slot("projected_gravity", 3, "1", "base"),
+        slot("tool_to_target", 3, "m", "base"),
+        slot("target_yaw_error", 1, "rad", "world z"),
+        slot("wheel_velocities", wheels, "rad/s", "joint"),
+        slot("previous_action", action_size, "1", "policy"),
+    ]
+}
+
+/// Total length of an observation with these slots.
+pub fn size(slots: &[ObservationSlot]) -> usize {
+    slots.iter().map(|s| s.size).sum()
+}
+
+/// The slots in one line, for a policy's metadata: `name:size:unit:frame` joined by `;`.
+pub fn describe(slots: &[ObservationSlot]) -> String {
+    slots
+        .iter()
+        .map(|s| format!("{}:{}:{}:{}", s.name, s.size, s.unit, s.frame))
+        .collect::<Vec<_>>()
+        .join(";")
+}
+
+/// Where the manipulator's tool should go: a position and a heading in the world (odometry)
+/// frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Target {
+    /// [m], world frame.
+    pub position_w: Vector3<f64>,
+    /// Heading of the tool's x axis about the world z axis [rad].
+    pub yaw: f64,
+}
+
+/// An angle wrapped into [-pi, pi).
+pub fn wrap_angle(a: f64) -> f64 {
+    (a + PI).rem_euclid(2.0 * PI) - PI
+}
+
+/// The heading [rad] of a tool frame: the angle of its x axis, projected on the world's
+/// horizontal plane, about the world z axis.
+pub fn tool_yaw(rotation_w: &UnitQuaternion<f64>) -> f64 {
+    let x = rotation_w * Vector3::x();
+    x.y.atan2(x.x)
+}
+
+/// The target's yaw minus the tool's, wrapped into [-pi, pi).
+pub fn yaw_error(tool_w: &Isometry3<f64>, target: &Target) -> f64 {
+    wrap_angle(target.yaw - tool_yaw(&tool_w.rotation))
+}
+
+/// The task's errors: tool position error [m] and absolute yaw error [rad].
+pub fn target_errors(tool_w: &Isometry3<f64>, target: &Target) -> (f64, f64) {
+    (
+        (target.position_w - tool_w.translation.vector).norm(),
+        yaw_error(tool_w, target).abs(),
+    )
+}
+
+/// What the observation is built from.
+#[derive(Debug, Clone, Copy)]
+pub struct BodyState<'a> {
+    /// The base link's pose in the world.
+    pub base_pose_w: Isometry3<f64>,
+    /// The base's linear velocity [m/s] in the world frame.
+    pub base_linear_velocity_w: Vector3<f64>,
+    /// The manipulator's tool pose in the world.
+    pub tool_pose_w: Isometry3<f64>,
+    pub target: Target,
+    /// Every wheel's angular velocity [rad/s], wheel modules in morphology order, each
+    /// module's wheels in actuator order.
+    pub wheel_velocities: &'a [f64],
+    /// The action of the previous control step (zeros after a reset), as the policy output it
+    /// (unclipped).
+    pub previous_action: &'a [f32],
+}
+
+/// Builds the observation, slot by slot as [`slots`] lists them.
+pub fn build(state: &BodyState) -> Vec<f32> {
+    let to_base = state.base_pose_w.rotation.inverse();
+    let velocity_b = to_base * state.base_linear_velocity_w;
+    let gravity_b = to_base * -Vector3::z();
+    let to_target_b = to_base * (state.target.position_w - state.tool_pose_w.translation.vector);
+    let mut obs =
+        Vec::with_capacity(10 + state.wheel_velocities.len() + state.previous_action.len());
+    obs.extend(velocity_b.iter().map(|v| *v as f32));
+    obs.extend(gravity_b.iter().map(|v| *v as f32));
+    obs.extend(to_target_b.iter().map(|v| *v as f32));
+    obs.push(yaw_error(&state.tool_pose_w, &state.target) as f32);
+    obs.extend(state.wheel_velocities.iter().map(|v| *v as f32));
+    obs.extend_from_slice(state.previous_action);
+    obs
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Translation3;
+
+    #[test]
+    fn angles_wrap_into_minus_pi_to_pi() {
+        assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-12);
+        assert!((wrap_angle(-3.0 * PI / 2.0) - PI / 2.0).abs() < 1e-12);
+        assert_eq!(wrap_angle(0.25), 0.25);
+        assert!((wrap_angle(PI) + PI).abs() < 1e-12);
+    }
+
+    #[test]
+    fn observation_by_hand() {
+        // Base turned 90 degrees about z, moving along world +x at 1 m/s: in the base frame
+        // that is -y. The tool sits 1 m above the base origin facing world +y (yaw pi/2); the
+        // target is 2 m along world +x at yaw 0.
+        let yaw90 = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), PI / 2.0);
+        let base = Isometry3::from_parts(Translation3::new(0.0, 0.0, 0.5), yaw90);
+        let tool = Isometry3::from_parts(Translation3::new(0.0, 0.0, 1.5), yaw90);
+        let target = Target {
+            position_w: Vector3::new(2.0, 0.0, 1.5),
+            yaw: 0.0,
+        };
+        let obs = build(&BodyState {
+            base_pose_w: base,
+            base_linear_velocity_w: Vector3::new(1.0, 0.0, 0.0),
+            tool_pose_w: tool,
+            target,
+            wheel_velocities: &[3.0, -3.0],
+            previous_action: &[0.5, -1.5],
+        });
+        let expected = [
+            0.0,
+            -1.0,
+            0.0, // velocity in the base frame
+            0.0,
+            0.0,
+            -1.0, // gravity
+            0.0,
+            -2.0,
+            0.0,              // target 2 m along world x is along base -y
+            -PI as f32 / 2.0, // turn right by 90 degrees
+            3.0,
+            -3.0,
+            0.5,
+            -1.5,
+        ];
+        assert_eq!(obs.len(), expected.len());
+        for (o, e) in obs.iter().zip(expected) {
+            assert!((o - e).abs() < 1e-6, "{obs:?}");
+        }
+        assert_eq!(size(&slots(2, 2)), obs.len());
+        let (distance, yaw) = target_errors(&tool, &target);
+        assert!((distance - 2.0).abs() < 1e-12 && (yaw - PI / 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn slots_describe_themselves() {
+        let text = describe(&slots(6, 18));
+        assert!(
+            text.starts_with("base_linear_velocity:3:m/s:base;"),
+            "{text}"
+        );
+        assert!(text.ends_with("wheel_velocities:6:rad/s:joint;previous_action:18:1:policy"));
+        assert_eq!(size(&slots(6, 18)), 10 + 6 + 18);
+    }
+}

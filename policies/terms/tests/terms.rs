@@ -1,0 +1,157 @@
+//! The action terms on the shipped robots: Table V's sizes, scaling, clipping and the contract.
+
+use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel, Role};
+use kumi_policies::rotation::orientation_error;
+use kumi_terms::action::{ActionTerms, GoalBounds, Term};
+use kumi_terms::contract::{self, ContractMismatch};
+
+fn robot(name: &str) -> RobotModel {
+    let library = ModuleLibrary::shipped();
+    assemble(&load_morphology(name, &library).unwrap(), &library)
+}
+
+const BOUNDS: GoalBounds = GoalBounds {
+    manipulator_position_m: 0.25,
+    manipulator_rotation_rad: 0.5,
+    leg_position_m: 0.1,
+    leg_roll_rad: 0.4,
+};
+
+#[test]
+fn goal_sizes_are_table_v() {
+    // Table V: goal values per morphology (6, 10, 18), plus one velocity per wheel module.
+    for (name, goals, wheels) in [("minimal", 6, 1), ("dragon", 10, 2), ("tricycle", 18, 3)] {
+        let terms = ActionTerms::new(&robot(name), &BOUNDS).unwrap();
+        let arm_values: usize = terms.arms().map(|a| a.width()).sum();
+        assert_eq!(arm_values, goals, "{name}");
+        assert_eq!(terms.wheels().count(), wheels, "{name}");
+        assert_eq!(terms.size(), goals + wheels);
+        assert_eq!(terms.names().len(), terms.size());
+    }
+}
+
+#[test]
+fn zero_action_is_the_home_tool_pose_and_bounds_scale_offsets() {
+    let model = robot("tricycle");
+    let terms = ActionTerms::new(&model, &BOUNDS).unwrap();
+    let zero = terms.commands(&vec![0.0; terms.size()]).unwrap();
+    for (goal, arm) in zero.goals.iter().zip(terms.arms()) {
+        assert_eq!(goal.position_b, arm.home_tool_b.translation.vector);
+        assert!(orientation_error(&goal.orientation_b, &arm.home_tool_b.rotation) < 1e-7);
+    }
+    // Tricycle's legs hold their tools at about (0.85, 0, 0.76) m in their base frames.
+    let leg = terms.arms().find(|a| a.module == "leg0").unwrap();
+    let home = leg.home_tool_b.translation.vector;
+    assert!(
+        (home.x - 0.847).abs() < 0.01 && (home.z - 0.758).abs() < 0.01,
+        "{home}"
+    );
+
+    // Saturated, over-saturated and non-finite values: clipped to the bounds, NaN holds home.
+    let mut action = vec![0.0_f32; terms.size()];
+    action[0] = 1.0; // arm0 dx
+    action[1] = 7.0; // arm0 dy, clipped to 1
+    action[2] = f32::NAN; // arm0 dz: 0
+    action[5] = -1.0; // arm0 rz: -0.5 rad about the base z axis
+    action[9] = 0.5; // leg0 roll (arm0 takes 0..6, leg0 6..10): 0.2 rad
+    let wheel_at = terms.size() - 3;
+    action[wheel_at] = -2.0; // wheel0: the negative limit
+    let c = terms.commands(&action).unwrap();
+    let arm0 = terms.arms().next().unwrap();
+    let d = c.goals[0].position_b - arm0.home_tool_b.translation.vector;
+    assert!(
+        (d - nalgebra::Vector3::new(0.25, 0.25, 0.0)).norm() < 1e-12,
+        "{d}"
+    );
+    let turn = c.goals[0].orientation_b * arm0.home_tool_b.rotation.inverse();
+    assert!((turn.scaled_axis() - nalgebra::Vector3::new(0.0, 0.0, -0.5)).norm() < 1e-12);
+    let roll = leg.home_tool_b.rotation.inverse() * c.goals[1].orientation_b;
+    assert!((roll.scaled_axis() - nalgebra::Vector3::new(0.2, 0.0, 0.0)).norm() < 1e-12);
+    let wheel = terms.wheels().next().unwrap();
+    assert!(wheel.scale_rad_s > 0.0 && wheel.scale_rad_s.is_finite());
+    assert_eq!(c.wheel_velocities[0], -wheel.scale_rad_s);
+    assert_eq!(c.wheel_velocities[1], 0.0);
+
+    assert!(terms.commands(&[0.0; 3]).is_err());
+}
+
+#[test]
+fn terms_follow_the_morphology_order_and_roles() {
+    let terms = ActionTerms::new(&robot("dragon"), &BOUNDS).unwrap();
+    let order: Vec<_> = terms.terms.iter().map(|t| t.module().to_string()).collect();
+    assert_eq!(order, ["front_wheel", "arm0", "leg0", "rear_wheel"]);
+    let roles: Vec<_> = terms.arms().map(|a| a.role).collect();
+    assert_eq!(roles, [Role::Manipulator, Role::Leg]);
+    assert!(matches!(terms.terms[0], Term::Wheel(_)));
+    assert!(terms
+        .describe()
+        .starts_with("front_wheel:wheel:1:velocity_rad_s="));
+    assert!(terms
+        .describe()
+        .contains("arm0:manipulator:6:position_m=0.25:rotation_rad=0.5;leg0:leg:4:position_m=0.1:roll_rad=0.4"));
+    // A bound that cannot scale anything is refused by name.
+    let bad = GoalBounds {
+        leg_roll_rad: f64::NAN,
+        ..BOUNDS
+    };
+    let err = ActionTerms::new(&robot("dragon"), &bad)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("leg_roll_rad"), "{err}");
+}
+
+#[test]
+fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
+    let (tricycle, dragon) = (robot("tricycle"), robot("dragon"));
+    let terms = ActionTerms::new(&tricycle, &BOUNDS).unwrap();
+    let trained = contract::contract(&tricycle, &terms, b"skill-a", 30.0);
+    assert_eq!(contract::check(&trained, &trained), Ok(()));
+    assert_eq!(trained[kumi_policies::metadata::OBSERVATION_DIM_KEY], "37");
+
+    let other_robot = contract::contract(
+        &dragon,
+        &ActionTerms::new(&dragon, &BOUNDS).unwrap(),
+        b"skill-a",
+        30.0,
+    );
+    match contract::check(&other_robot, &trained) {
+        Err(ContractMismatch::Differs {
+            key,
+            found,
+            expected,
+        }) => {
+            assert_eq!(key, contract::MORPHOLOGY);
+            assert_eq!((found.as_str(), expected.as_str()), ("tricycle", "dragon"));
+        }
+        other => panic!("{other:?}"),
+    }
+    let other_skill = contract::contract(&tricycle, &terms, b"skill-b", 30.0);
+    let err = contract::check(&other_skill, &trained)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains(contract::SKILL_FINGERPRINT), "{err}");
+    // The same robot with other bounds: the action key differs.
+    let wider = ActionTerms::new(
+        &tricycle,
+        &GoalBounds {
+            leg_position_m: 0.2,
+            ..BOUNDS
+        },
+    )
+    .unwrap();
+    let err = contract::check(
+        &contract::contract(&tricycle, &wider, b"skill-a", 30.0),
+        &trained,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains(contract::ACTION), "{err}");
+    let mut missing = trained.clone();
+    missing.remove(contract::SKILL_FINGERPRINT);
+    assert_eq!(
+        contract::check(&trained, &missing),
+        Err(ContractMismatch::Missing {
+            key: contract::SKILL_FINGERPRINT
+        })
+    );
+}

@@ -1,0 +1,132 @@
+//! The upper-level reward (the paper's Table IV) and termination, as pure functions.
+//!
+//! r = w_p1 (1 - tanh(d / 2)) + w_p2 (1 - tanh(d / 0.2)) - w_o |theta_h|
+//!     - w_v |qd|^2 - w_a |a_t - a_{t-1}|^2 + alive
+//!
+//! where d is the tool-to-target distance [m], theta_h the yaw error [rad], qd the arm joints'
+//! velocities [rad/s] (wheels excluded: driving is the task) and a the policy's actions.
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+/// Table IV's scales [m] of the coarse and the close-range position terms.
+pub const COARSE_SCALE_M: f64 = 2.0;
+pub const CLOSE_SCALE_M: f64 = 0.2;
+
+/// Weights of the upper-level reward (the paper gives the terms, not the weights).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodyWeights {
+    pub w_p1: f64,
+    pub w_p2: f64,
+    /// Yaw error penalty [1/rad].
+    pub w_o: f64,
+    /// Arm joint velocity penalty [1/(rad/s)^2].
+    pub w_v: f64,
+    /// Action-rate penalty (policy units).
+    pub w_a: f64,
+    /// Reward per step for staying up (the paper: 0.2 for Minimal, none for the others).
+    pub alive: f64,
+}
+
+/// Every term of one step's reward, signed as added.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BodyTerms {
+    pub position: f64,
+    pub close_position: f64,
+    pub yaw: f64,
+    pub joint_velocity: f64,
+    pub action_rate: f64,
+    pub alive: f64,
+}
+
+impl BodyTerms {
+    pub fn total(&self) -> f64 {
+        self.position
+            + self.close_position
+            + self.yaw
+            + self.joint_velocity
+            + self.action_rate
+            + self.alive
+    }
+}
+
+/// The terms for a distance [m], a yaw error [rad], arm joint velocities [rad/s] and this and
+/// the previous action.
+pub fn body_terms(
+    distance_m: f64,
+    yaw_error_rad: f64,
+    arm_joint_velocities: &[f64],
+    action: &[f32],
+    previous_action: &[f32],
+    w: &BodyWeights,
+) -> BodyTerms {
+    let rate: f64 = action
+        .iter()
+        .zip(previous_action)
+        .map(|(a, b)| f64::from(a - b).powi(2))
+        .sum();
+    let speed: f64 = arm_joint_velocities.iter().map(|v| v * v).sum();
+    BodyTerms {
+        position: w.w_p1 * (1.0 - (distance_m / COARSE_SCALE_M).tanh()),
+        close_position: w.w_p2 * (1.0 - (distance_m / CLOSE_SCALE_M).tanh()),
+        yaw: -w.w_o * yaw_error_rad.abs(),
+        joint_velocity: -w.w_v * speed,
+        action_rate: -w.w_a * rate,
+        alive: w.alive,
+    }
+}
+
+/// The base's tilt [rad]: the angle between its z axis and the world's.
+pub fn tilt(base_rotation_w: &UnitQuaternion<f64>) -> f64 {
+    let z = base_rotation_w * Vector3::z();
+    z.z.clamp(-1.0, 1.0).acos()
+}
+
+/// The episode ends when the base tilts past `limit_rad` (Table V's threshold).
+pub fn fallen(base_rotation_w: &UnitQuaternion<f64>, limit_rad: f64) -> bool {
+    tilt(base_rotation_w) > limit_rad
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const W: BodyWeights = BodyWeights {
+        w_p1: 1.0,
+        w_p2: 2.0,
+        w_o: 0.5,
+        w_v: 0.01,
+        w_a: 0.1,
+        alive: 0.2,
+    };
+
+    #[test]
+    fn terms_by_hand() {
+        // d = 0.2 m: 1 - tanh(0.1) = 0.900332, 1 - tanh(1) = 0.238406 (times 2).
+        let t = body_terms(0.2, -0.4, &[1.0, -2.0], &[0.5, 0.0], &[0.0, 1.0], &W);
+        assert!((t.position - 0.900_332).abs() < 1e-6, "{t:?}");
+        assert!((t.close_position - 0.476_812).abs() < 1e-6, "{t:?}");
+        assert!((t.yaw + 0.2).abs() < 1e-12);
+        assert!((t.joint_velocity + 0.05).abs() < 1e-12);
+        assert!((t.action_rate + 0.125).abs() < 1e-12);
+        assert_eq!(t.alive, 0.2);
+        let sum = 0.900_332 + 0.476_812 - 0.2 - 0.05 - 0.125 + 0.2;
+        assert!((t.total() - sum).abs() < 1e-5);
+        // At the target with no motion: both position terms are whole.
+        let t = body_terms(0.0, 0.0, &[0.0], &[0.0], &[0.0], &W);
+        assert_eq!(t.total(), 1.0 + 2.0 + 0.2);
+    }
+
+    #[test]
+    fn tilt_terminates_past_the_threshold() {
+        let level = UnitQuaternion::identity();
+        assert_eq!(tilt(&level), 0.0);
+        let tipped = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.7);
+        assert!((tilt(&tipped) - 0.7).abs() < 1e-12);
+        assert!(fallen(&tipped, 0.6)); // Minimal's threshold
+        assert!(!fallen(&tipped, 0.785)); // Tricycle's
+                                          // Yaw alone is no tilt.
+        let turned = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 3.0);
+        assert!(tilt(&turned) < 1e-12);
+    }
+}

@@ -1,0 +1,357 @@
+//! The upper-level environment (SPEC section 5, the paper's section IV-B), generated from any
+//! morphology with one manipulator: the robot stands at a random pose, a target (position and
+//! yaw) is drawn around it, and the policy commands the frozen skill of every arm module and
+//! the velocity of every wheel module through the action terms of `kumi-terms`. A thin shell:
+//! observation, action terms and reward are shared pure functions; physics is any engine.
+
+use std::f64::consts::PI;
+use std::ops::Range;
+use std::sync::Arc;
+
+use kumi_model::{ActuatorMode, RobotModel, Role};
+use kumi_policies::observation::{self as skill_obs, Goal, JOINTS, OBSERVATION_DIM};
+use kumi_policies::skill::ArmSkill;
+use kumi_runtime::{BackendChoice, SkillPolicy};
+use kumi_terms::action::{ActionTerms, GoalBounds};
+use kumi_terms::observation::{self as body_obs, BodyState, Target};
+use kumi_worlds::{home_joint_positions, Engine, SimConfig, SimWorld};
+use nalgebra::{Isometry3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::arm_reach::EnvError;
+use crate::body_reward::{body_terms, fallen, BodyTerms, BodyWeights};
+
+/// The task's settings per morphology (`[task]` in `train/configs/whole_body/*.toml`).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskConfig {
+    /// Episode length [s] (the paper: 12).
+    pub episode_s: f64,
+    /// Base tilt [rad] past which the episode ends (Table V: Minimal 0.6, Dragon 1.0,
+    /// Tricycle 0.785).
+    pub tilt_limit_rad: f64,
+    /// Targets: x and y uniform in [-r, r] [m] of the world origin (the paper: 3).
+    pub target_xy_m: f64,
+    /// Targets: z uniform in this range [m] (per morphology: around the manipulator's reach).
+    pub target_z_m: [f64; 2],
+    /// The base starts at x and y uniform in [-r, r] [m] (the paper: 0.5), yaw uniform.
+    pub initial_xy_m: f64,
+}
+
+impl TaskConfig {
+    fn check(&self) -> Result<(), EnvError> {
+        let [lo, hi] = self.target_z_m;
+        let ok = self.episode_s > 0.0
+            && self.tilt_limit_rad > 0.0
+            && self.target_xy_m >= 0.0
+            && self.initial_xy_m >= 0.0
+            && lo.is_finite()
+            && hi >= lo;
+        if ok {
+            Ok(())
+        } else {
+            Err(EnvError::Goals(format!("invalid [task]: {self:?}")))
+        }
+    }
+}
+
+/// Everything the environment needs besides the robot and the skill.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WholeBodyConfig {
+    pub engine: Engine,
+    pub task: TaskConfig,
+    pub weights: BodyWeights,
+    pub bounds: GoalBounds,
+}
+
+/// One arm module as the frozen-skill term drives it.
+struct ArmIo {
+    module: String,
+    skill: ArmSkill,
+    /// Its joints in the world's actuator vectors.
+    joints: Range<usize>,
+}
+
+/// What one step produced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BodyStep {
+    pub observation: Vec<f32>,
+    pub reward: f64,
+    pub terms: BodyTerms,
+    /// The base tilted past the limit, or the physics diverged.
+    pub terminated: bool,
+    pub truncated: bool,
+    /// Tool position error [m] and absolute yaw error [rad] to the target after this step.
+    pub position_error: f64,
+    pub yaw_error: f64,
+}
+
+/// One robot reaching targets with its manipulator, over the frozen skill.
+pub struct WholeBody {
+    world: Box<dyn SimWorld>,
+    terms: ActionTerms,
+    arms: Vec<ArmIo>,
+    wheel_modules: Vec<String>,
+    /// Actuator indices of every wheel joint (wheel modules in order).
+    wheel_joints: Vec<usize>,
+    tool_link: String,
+    skill: SkillPolicy,
+    config: WholeBodyConfig,
+    episode_steps: usize,
+    rng: ChaCha8Rng,
+    target: Target,
+    previous_action: Vec<f32>,
+    step: usize,
+}
+
+impl WholeBody {
+    /// An environment for `model` (one manipulator, arm and wheel modules), its arms driven by
+    /// the skill in `skill_onnx` (the file's bytes; checked against every arm module), seeded.
+    pub fn new(
+        model: Arc<RobotModel>,
+        config: WholeBodyConfig,
+        skill_onnx: &[u8],
+        seed: u64,
+    ) -> Result<Self, EnvError> {
+        config.task.check()?;
+        let manipulators: Vec<_> = model.modules_with_role(Role::Manipulator).collect();
+        let [manipulator] = manipulators.as_slice() else {
+            return Err(EnvError::Goals(format!(
+                "the whole-body task needs exactly one manipulator; `{}` has {}",
+                model.name,
+                manipulators.len()
+            )));
+        };
+        let tool_link = manipulator
+            .ee_link
+            .clone()
+            .ok_or_else(|| EnvError::NotASingleArm(manipulator.name.clone()))?;
+        let terms =
+            ActionTerms::new(&model, &config.bounds).map_err(|e| EnvError::Goals(e.to_string()))?;
+        let sim = SimConfig::for_model(&model);
+        let world = kumi_worlds::build(config.engine, model.clone(), sim)?;
+        let mut arms = Vec::new();
+        for term in terms.arms() {
+            let module = model
+                .module(&term.module)
+                .expect("terms come from the model");
+            arms.push(ArmIo {
+                module: term.module.clone(),
+                skill: ArmSkill::new(module, sim.control_hz)?,
+                joints: world.module_range(&term.module)?,
+            });
+        }
+        let skill = load_skill(skill_onnx, &arms)?;
+        let wheel_modules: Vec<String> = terms.wheels().map(|w| w.module.clone()).collect();
+        let wheel_joints = world
+            .servos()
+            .actuators()
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| a.mode == ActuatorMode::Velocity)
+            .map(|(i, _)| i)
+            .collect();
+        let episode_steps = (config.task.episode_s * sim.control_hz).round() as usize;
+        let mut env = Self {
+            previous_action: vec![0.0; terms.size()],
+            world,
+            terms,
+            arms,
+            wheel_modules,
+            wheel_joints,
+            tool_link,
+            skill,
+            config,
+            episode_steps,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            target: Target {
+                position_w: Vector3::zeros(),
+                yaw: 0.0,
+            },
+            step: 0,
+        };
+        env.reset();
+        Ok(env)
+    }
+
+    /// The action terms (their size is the action's).
+    pub fn terms(&self) -> &ActionTerms {
+        &self.terms
+    }
+
+    pub fn observation_dim(&self) -> usize {
+        body_obs::size(&body_obs::slots(self.wheel_joints.len(), self.terms.size()))
+    }
+
+    /// The simulated world (read-only).
+    pub fn world(&self) -> &dyn SimWorld {
+        self.world.as_ref()
+    }
+
+    /// The simulated world, to place the robot (evaluation, tests).
+    pub fn world_mut(&mut self) -> &mut dyn SimWorld {
+        self.world.as_mut()
+    }
+
+    pub fn target(&self) -> Target {
+        self.target
+    }
+
+    /// Sets the target (evaluation, demos); the next observation sees it.
+    pub fn set_target(&mut self, target: Target) {
+        self.target = target;
+    }
+
+    /// Restarts the random stream (evaluation seeds each episode).
+    pub fn reseed(&mut self, seed: u64) {
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
+    }
+
+    /// Starts an episode: the robot at home, standing at a random pose; a random target.
+    pub fn reset(&mut self) -> Vec<f32> {
+        let t = self.config.task;
+        let r = t.initial_xy_m;
+        let (x, y) = (self.uniform(-r, r), self.uniform(-r, r));
+        let yaw = self.uniform(-PI, PI);
+        let state = self
+            .world
+            .standing_state(x, y, yaw, home_joint_positions(self.world.model()));
+        self.world.reset(&state);
+        let r = t.target_xy_m;
+        self.target = Target {
+            position_w: Vector3::new(
+                self.uniform(-r, r),
+                self.uniform(-r, r),
+                self.uniform(t.target_z_m[0], t.target_z_m[1]),
+            ),
+            yaw: self.uniform(-PI, PI),
+        };
+        self.previous_action.iter_mut().for_each(|a| *a = 0.0);
+        self.step = 0;
+        self.observation()
+    }
+
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        if hi > lo {
+            self.rng.random_range(lo..hi)
+        } else {
+            lo
+        }
+    }
+
+    /// The manipulator's tool pose in the world.
+    pub fn tool_pose_w(&self) -> Isometry3<f64> {
+        self.world
+            .link_pose(&self.tool_link)
+            .expect("the tool link exists")
+    }
+
+    /// Tool position error [m] and absolute yaw error [rad] to the target now.
+    pub fn errors(&self) -> (f64, f64) {
+        body_obs::target_errors(&self.tool_pose_w(), &self.target)
+    }
+
+    /// The observation the policy sees now.
+    pub fn observation(&self) -> Vec<f32> {
+        let velocities = self.world.joint_velocities();
+        let wheels: Vec<f64> = self.wheel_joints.iter().map(|&i| velocities[i]).collect();
+        body_obs::build(&BodyState {
+            base_pose_w: self.world.base_pose(),
+            base_linear_velocity_w: self.world.base_twist_w().0,
+            tool_pose_w: self.tool_pose_w(),
+            target: self.target,
+            wheel_velocities: &wheels,
+            previous_action: &self.previous_action,
+        })
+    }
+
+    /// Each arm module's skill observation for its goal, as the arm-reach environment and the
+    /// arm node build it: its own joints, the goal in its own base frame.
+    pub fn skill_observations(&self, goals: &[Goal]) -> Vec<[f32; OBSERVATION_DIM]> {
+        let (q, qd) = (self.world.joint_positions(), self.world.joint_velocities());
+        self.arms
+            .iter()
+            .zip(goals)
+            .map(|(arm, goal)| {
+                let r = arm.joints.clone();
+                let qa: [f64; JOINTS] = std::array::from_fn(|j| q[r.start + j]);
+                let qda: [f64; JOINTS] = std::array::from_fn(|j| qd[r.start + j]);
+                skill_obs::build(&qa, &qda, goal)
+            })
+            .collect()
+    }
+
+    /// Applies one action through the terms, steps the physics one control step.
+    pub fn step(&mut self, action: &[f32]) -> BodyStep {
+        let commands = self
+            .terms
+            .commands(action)
+            .expect("the trainer sends actions of the terms' size");
+        let observations = self.skill_observations(&commands.goals);
+        let skill_actions = self
+            .skill
+            .act_batch(&observations)
+            .expect("the skill was checked at load");
+        for (arm, a) in self.arms.iter().zip(&skill_actions) {
+            self.world
+                .apply_increments(&arm.module, &arm.skill.increments(a))
+                .expect("increments are finite and sized for the module");
+        }
+        for (module, v) in self.wheel_modules.iter().zip(&commands.wheel_velocities) {
+            self.world
+                .set_wheel_velocity(module, *v)
+                .expect("a wheel module");
+        }
+        self.world.step();
+        self.step += 1;
+
+        let (position_error, yaw_error) = self.errors();
+        let velocities = self.world.joint_velocities();
+        let arm_velocities: Vec<f64> = self
+            .arms
+            .iter()
+            .flat_map(|a| velocities[a.joints.clone()].iter().copied())
+            .collect();
+        let terms = body_terms(
+            position_error,
+            yaw_error,
+            &arm_velocities,
+            action,
+            &self.previous_action,
+            &self.config.weights,
+        );
+        self.previous_action.copy_from_slice(action);
+        let terminated = self.world.diverged()
+            || fallen(
+                &self.world.base_pose().rotation,
+                self.config.task.tilt_limit_rad,
+            );
+        BodyStep {
+            observation: self.observation(),
+            reward: terms.total(),
+            terms,
+            terminated,
+            truncated: self.step >= self.episode_steps,
+            position_error,
+            yaw_error,
+        }
+    }
+}
+
+/// The skill, loaded once for the environment (tract: no native library needed in training)
+/// and checked against every arm module it will drive.
+fn load_skill(bytes: &[u8], arms: &[ArmIo]) -> Result<SkillPolicy, EnvError> {
+    let first = arms
+        .first()
+        .ok_or_else(|| EnvError::Goals("no arm module for the skill to drive".into()))?;
+    let skill =
+        SkillPolicy::from_bytes(bytes.to_vec(), "skill", &first.skill, BackendChoice::Tract)
+            .map_err(|e| EnvError::Goals(e.to_string()))?;
+    for arm in &arms[1..] {
+        arm.skill
+            .check(skill.metadata())
+            .map_err(|e| EnvError::Goals(format!("skill for module `{}`: {e}", arm.module)))?;
+    }
+    Ok(skill)
+}
