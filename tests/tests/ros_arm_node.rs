@@ -14,8 +14,8 @@ const GOAL: [f64; 7] = [0.35, 0.1, 1.0, 0.968_912_4, 0.247_403_96, 0.0, 0.0];
 
 /// How close the tool must end [m]: the shipped skill's accuracy over ROS, not better than the
 /// skill itself. Over 1000 goals of the paper's box in rapier its final position error has mean
-/// 0.10 m and p90 0.17 m (`policies/arm_reach.md`); on this goal it ends 0.10 m away in process
-/// and over ROS alike. (The skill before working starts ended within 5 cm here.)
+/// 0.10 m and p90 0.17 m (`policies/arm_reach.md`); over ROS it ends 0.10 m from this goal.
+/// (The skill before working starts ended within 5 cm here.)
 const REACH_BOUND_M: f64 = 0.15;
 
 #[test]
