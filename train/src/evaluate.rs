@@ -26,6 +26,14 @@ pub struct ErrorStats {
 }
 
 impl ErrorStats {
+    /// One markdown table row: `| name | mean | std | median | p90 |`.
+    pub fn markdown_row(name: &str, s: &ErrorStats) -> String {
+        format!(
+            "| {name} | {:.4} | {:.4} | {:.4} | {:.4} |\n",
+            s.mean, s.std, s.median, s.p90
+        )
+    }
+
     /// The summary of `values` (NaN everywhere if empty).
     pub fn of(values: &[f64]) -> Self {
         if values.is_empty() {
@@ -73,12 +81,7 @@ pub struct Evaluation {
 impl Evaluation {
     /// The result as a markdown table.
     pub fn markdown(&self) -> String {
-        let row = |name: &str, s: &ErrorStats| {
-            format!(
-                "| {name} | {:.4} | {:.4} | {:.4} | {:.4} |\n",
-                s.mean, s.std, s.median, s.p90
-            )
-        };
+        let row = ErrorStats::markdown_row;
         format!(
             "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}",
             self.rollouts,

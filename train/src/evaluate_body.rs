@@ -35,12 +35,7 @@ pub struct BodyEvaluation {
 impl BodyEvaluation {
     /// The result as a markdown table.
     pub fn markdown(&self) -> String {
-        let row = |name: &str, s: &ErrorStats| {
-            format!(
-                "| {name} | {:.4} | {:.4} | {:.4} | {:.4} |\n",
-                s.mean, s.std, s.median, s.p90
-            )
-        };
+        let row = ErrorStats::markdown_row;
         format!(
             "| {} ({} rollouts, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}{}{}| terminations | {} of {} | | | |\n",
             self.robot,
