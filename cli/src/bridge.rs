@@ -21,7 +21,10 @@ pub struct BridgeArgs {
     /// tick (or the lockstep timeout passes); publishes /clock; runs as fast as its consumers.
     #[arg(long)]
     pub lockstep: bool,
-    /// Lockstep: step anyway after this long without every expected command [s].
+    /// Lockstep: step anyway after this long without every expected command [s]. Time stands
+    /// still only before the first command: a controller that dies is stepped without, once
+    /// per timeout (logged, and listed in /diagnostics as `lockstep_silent`), until its module
+    /// holds.
     #[arg(long, default_value_t = 0.5)]
     pub lockstep_timeout: f64,
     /// Real-time mode: simulated seconds per wall-clock second.

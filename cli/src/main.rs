@@ -81,6 +81,12 @@ fn run() -> Result<()> {
                 }),
         )
         .with_writer(std::io::stderr)
+        // Colour codes only on a terminal: log files and pipes get plain text (and NO_COLOR
+        // turns them off everywhere, as https://no-color.org asks).
+        .with_ansi(
+            std::io::IsTerminal::is_terminal(&std::io::stderr())
+                && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty()),
+        )
         .init();
     let cli = Cli::parse();
     match cli.command {

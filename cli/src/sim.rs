@@ -5,9 +5,8 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel, Role};
-use kumi_worlds::{Engine, Layout, SimConfig, SimWorld};
-use nalgebra::Vector3;
+use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
+use kumi_worlds::{Engine, Layout, SimConfig};
 use serde::Serialize;
 
 /// Loads and assembles a morphology by shipped name or file path.
@@ -118,22 +117,6 @@ struct SimReport {
     ground_contacts_at_end: Vec<String>,
 }
 
-/// The sign that makes a wheel module drive the base along its +x: the module's own forward
-/// axis (body x) projected on the base x axis at the start.
-pub fn wheel_directions(world: &dyn SimWorld) -> Vec<(String, f64)> {
-    let base = world.base_pose();
-    let base_x = base.rotation * Vector3::x();
-    world
-        .model()
-        .modules_with_role(Role::Wheel)
-        .map(|m| {
-            let body = world.link_pose(&m.root_link).expect("wheel body exists");
-            let forward = body.rotation * Vector3::x();
-            (m.name.clone(), forward.dot(&base_x).signum())
-        })
-        .collect()
-}
-
 pub fn run(args: SimArgs) -> Result<()> {
     if !(args.seconds.is_finite() && args.seconds > 0.0) {
         bail!(
@@ -146,8 +129,13 @@ pub fn run(args: SimArgs) -> Result<()> {
     let engine = crate::engine::choose(args.physics.engine, Engine::Rapier)?;
     let mut world =
         crate::engine::world(engine, model.clone(), config).context("building the world")?;
-    for (module, sign) in wheel_directions(world.as_ref()) {
-        world.set_wheel_velocity(&module, sign * args.wheel_velocity)?;
+    // Positive drives the base along +x, however each module is mounted (the world's rule).
+    for m in model
+        .modules
+        .iter()
+        .filter(|m| m.velocity_joints().next().is_some())
+    {
+        world.set_wheel_velocity(&m.name, args.wheel_velocity)?;
     }
     let start = world.base_pose().translation.vector;
     let steps = (args.seconds * config.control_hz).round() as u64;

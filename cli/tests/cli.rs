@@ -426,3 +426,24 @@ mod mujoco {
         );
     }
 }
+
+#[test]
+fn logs_carry_no_colour_codes_when_not_on_a_terminal() {
+    // Issue 10, finding 10: log files had ANSI colour codes.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_kumi"))
+        .args(["sim-bridge", "arm"])
+        .env("ROS_DOMAIN_ID", (190 + std::process::id() % 40).to_string())
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("kumi runs");
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    child.kill().unwrap();
+    let out = child.wait_with_output().unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(log.contains("sim bridge up"), "{log}");
+    assert!(
+        !log.contains('\u{1b}'),
+        "colour codes in a log file: {log:?}"
+    );
+}

@@ -88,7 +88,7 @@ impl ArmSkill {
                 .iter()
                 .map(|a| a.joint.trim_start_matches(prefix.as_str()).to_string())
                 .collect(),
-            increment_scale: std::array::from_fn(|i| positions[i].velocity_limit / control_hz),
+            increment_scale: std::array::from_fn(|i| positions[i].max_increment(control_hz)),
             control_hz,
         })
     }

@@ -181,27 +181,34 @@ def cmd_drive(args, peer):
     peer.listen(JointState, js_topic)
     peer.listen(Odometry, f"/{r}/odom")
     inc = peer.create_publisher(Float64MultiArray, f"/{r}/{args.arm}/joint_increments", DEFAULT)
-    wheel = peer.create_publisher(Float64, f"/{r}/{args.wheel}/wheel_velocity", DEFAULT)
+    wheels = [peer.create_publisher(Float64, f"/{r}/{w}/wheel_velocity", DEFAULT) for w in (args.wheels or args.wheel).split(",")]
     out = {}
     if not peer.spin_until(lambda: js_topic in peer.latest and f"/{r}/odom" in peer.latest, args.timeout):
         return {"error": "no joint states or odometry"}
     # Wait until a subscriber for our increments exists (discovery), then send one increment.
-    peer.spin_until(lambda: inc.get_subscription_count() > 0 and wheel.get_subscription_count() > 0, args.timeout)
+    peer.spin_until(lambda: inc.get_subscription_count() > 0 and all(w.get_subscription_count() > 0 for w in wheels), args.timeout)
     q0 = list(peer.latest[js_topic].position)
     msg = Float64MultiArray()
     msg.data = [args.increment if i == args.joint else 0.0 for i in range(len(q0))]
-    inc.publish(msg)
+    for _ in range(args.count):  # each within one control step's reach
+        inc.publish(msg)
+        peer.spin_until(lambda: False, 0.05)
     peer.spin_until(lambda: False, 1.0)
     out["q0"] = q0
     out["q1"] = list(peer.latest[js_topic].position)
     # Wheels: keep commanding (commands older than 0.5 s are dropped), watch the base move.
     x0 = peer.latest[f"/{r}/odom"].pose.pose.position
+    q = peer.latest[f"/{r}/odom"].pose.pose.orientation
+    yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
     deadline = time.monotonic() + args.drive_seconds
     while time.monotonic() < deadline:
-        wheel.publish(Float64(data=args.wheel_velocity))
+        for w in wheels:
+            w.publish(Float64(data=args.wheel_velocity))
         peer.spin_until(lambda: False, 0.1)
     x1 = peer.latest[f"/{r}/odom"].pose.pose.position
     out["base_moved_m"] = math.dist([x0.x, x0.y], [x1.x, x1.y])
+    # Along the base's x axis as it was at the start.
+    out["base_forward_m"] = (x1.x - x0.x) * math.cos(yaw) + (x1.y - x0.y) * math.sin(yaw)
     return out
 
 
@@ -301,6 +308,17 @@ def cmd_reach(args, peer):
     if not peer.spin_until(lambda: ee_topic in peer.latest and "/clock" in peer.latest and goal.get_subscription_count() > 0, args.timeout):
         return {"error": "arm node or bridge not found"}
     sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
+    if args.disturb:
+        # Another publisher moves joint2 (issue 10, finding 1; within the skill's start range of
+        # +-0.5 rad), and a wild increment arrives: the bridge owns the targets, so neither may
+        # throw the arm node off its later goals.
+        jset = peer.create_publisher(JointState, f"/{r}/{a}/joint_set", DEFAULT)
+        inc = peer.create_publisher(Float64MultiArray, f"/{r}/{a}/joint_increments", DEFAULT)
+        peer.spin_until(lambda: jset.get_subscription_count() > 0 and inc.get_subscription_count() > 0, args.timeout)
+        jset.publish(JointState(name=["joint2"], position=[0.45]))
+        inc.publish(Float64MultiArray(data=[1e308] * 7))
+        t0 = sim()
+        peer.spin_until(lambda: sim() >= t0 + 2.0, args.timeout)
     start = sim()
     goal.publish(goal_msg([float(v) for v in args.goal.split(",")], args.frame))
     peer.spin_until(lambda: sim() >= start + args.drive_seconds, args.timeout)
@@ -308,6 +326,39 @@ def cmd_reach(args, peer):
     p, o = ee.pose.position, ee.pose.orientation
     return {"start": start, "end": sim(), "position": [p.x, p.y, p.z], "orientation": [o.w, o.x, o.y, o.z],
             "frame": ee.header.frame_id}
+
+
+def cmd_watch(args, peer):
+    """Watches a robot for --drive-seconds of wall time: how far /clock moved, the bridge's last
+    diagnostics (the largest stale_holds and lockstep_timeouts seen, every lockstep_silent
+    value), and the arm's joint speeds at the end."""
+    r, a = args.robot, args.arm
+    js_topic = f"/{r}/{a}/joint_states"
+    peer.listen(JointState, js_topic)
+    peer.listen(Clock, "/clock")
+    silent, holds, timeouts, node = set(), 0, 0, {"stale_holds": 0, "messages": []}
+
+    def on_diag(m):
+        nonlocal holds, timeouts
+        for status in m.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if status.name.startswith("kumi arm node"):
+                node["stale_holds"] = max(node["stale_holds"], int(values["stale_holds"]))
+                node["messages"].append(status.message)
+                continue
+            holds = max(holds, int(values.get("stale_holds", 0)))
+            timeouts = max(timeouts, int(values.get("lockstep_timeouts", 0)))
+            silent.update(v for v in values.get("lockstep_silent", "").split(",") if v)
+
+    peer.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DEFAULT)
+    if not peer.spin_until(lambda: "/clock" in peer.latest and js_topic in peer.latest, args.timeout):
+        return {"error": "no bridge"}
+    sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
+    start = sim()
+    peer.spin_until(lambda: False, args.drive_seconds)
+    return {"clock_start": start, "clock_end": sim(), "stale_holds": holds, "lockstep_timeouts": timeouts,
+            "lockstep_silent": sorted(silent), "max_speed": max(abs(v) for v in peer.latest[js_topic].velocity),
+            "node": node}
 
 
 def cmd_armnode(args, peer):
@@ -412,6 +463,11 @@ def cmd_badinput(args, peer):
         m = Float64MultiArray(); m.data = [0.3] * 9; inc.publish(m)
         j = JointState(); j.name = ["joint1", "joint2"]; j.position = [0.3]; jset.publish(j)
         peer.spin_until(lambda: False, 0.5); alive("wrong_length")
+    elif kind == "too_large":
+        # More than a joint moves in one control step (1.5 rad/s / 30 Hz = 0.05 rad).
+        m = Float64MultiArray(); m.data = [1e308] * 7; inc.publish(m)
+        m = Float64MultiArray(); m.data = [0.3] + [0.0] * 6; inc.publish(m)
+        peer.spin_until(lambda: False, 0.5); alive("too_large")
     elif kind == "unknown_joint":
         j = JointState(); j.name = ["joint1", "elbow_of_doom"]; j.position = [0.3, 0.3]; jset.publish(j)
         peer.spin_until(lambda: False, 0.5); alive("unknown_joint")
@@ -468,6 +524,8 @@ def main():
     p.add_argument("--wheel", default="")
     p.add_argument("--joint", type=int, default=0)
     p.add_argument("--increment", type=float, default=0.2)
+    p.add_argument("--count", type=int, default=1)
+    p.add_argument("--disturb", action="store_true")
     p.add_argument("--wheel-velocity", type=float, default=2.0)
     p.add_argument("--drive-seconds", type=float, default=3.0)
     p.add_argument("--samples", default="")
@@ -487,7 +545,7 @@ def main():
         out = {
             "observe": cmd_observe, "drive": cmd_drive, "late": cmd_late, "roundtrip": cmd_roundtrip,
             "lockstep": cmd_lockstep, "badinput": cmd_badinput, "latency": cmd_latency,
-            "reach": cmd_reach, "armnode": cmd_armnode,
+            "reach": cmd_reach, "armnode": cmd_armnode, "watch": cmd_watch,
         }[args.command](args, peer)
     finally:
         peer.destroy_node()

@@ -5,18 +5,8 @@ use std::time::Duration;
 
 use kumi_arm_node::Output;
 use kumi_sim_bridge::Mode;
-use kumi_tests::{fresh_domain, peer, ArmNode, Bridge};
+use kumi_tests::{fresh_domain, peer, reach_arm_goal, ArmNode, Bridge, REACH_BOUND_M};
 use serde_json::Value;
-
-/// A goal inside the training distribution (SPEC section 4: position box, pitch within pi/3,
-/// yaw 0): x, y, z [m], then the quaternion w, x, y, z (roll 0.5 rad about the tool's x axis).
-const GOAL: [f64; 7] = [0.35, 0.1, 1.0, 0.968_912_4, 0.247_403_96, 0.0, 0.0];
-
-/// How close the tool must end [m]: the shipped skill's accuracy over ROS, not better than the
-/// skill itself. Over 1000 goals of the paper's box in rapier its final position error has mean
-/// 0.10 m and p90 0.17 m (`policies/arm_reach.md`); over ROS it ends 0.10 m from this goal.
-/// (The skill before working starts ended within 5 cm here.)
-const REACH_BOUND_M: f64 = 0.15;
 
 #[test]
 fn an_rclpy_goal_is_reached_within_the_skills_accuracy_in_4_s_of_sim_time() {
@@ -38,45 +28,20 @@ fn reach(output: Output) {
         },
     );
     let node = ArmNode::start("arm", "arm", "arm", domain, output);
-    let goal: Vec<String> = GOAL.iter().map(|v| v.to_string()).collect();
-    let out = peer(
-        domain,
-        &[
-            "reach",
-            "--robot",
-            "arm",
-            "--arm",
-            "arm",
-            "--goal",
-            &goal.join(","),
-            "--drive-seconds",
-            "4",
-            "--timeout",
-            "60",
-        ],
-        Duration::from_secs(90),
-    );
+    let (error, out) = reach_arm_goal(domain, 4.0, &[]);
     assert!(node.alive() && bridge.alive(), "a node stopped: {out}");
     drop(node);
     bridge.stop().unwrap();
-    assert!(out.get("error").is_none(), "{out}");
     let sim_s = out["end"].as_f64().unwrap() - out["start"].as_f64().unwrap();
     // 120 steps of 1/30 s sum to 3.9999999999999996 in floating point.
     assert!((3.999..4.5).contains(&sim_s), "ran {sim_s} s of sim time");
-    let p: Vec<f64> = out["position"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    let error =
-        ((p[0] - GOAL[0]).powi(2) + (p[1] - GOAL[1]).powi(2) + (p[2] - GOAL[2]).powi(2)).sqrt();
     eprintln!("{output:?}: tool ended {error:.4} m from the goal after {sim_s:.2} s of sim time");
     assert!(
         error < REACH_BOUND_M,
         "tool ended {error:.3} m from the goal: {out}"
     );
-    assert_eq!(out["frame"], "arm/base", "{out}");
+    // The frame as `/tf` names it: robot `arm`, module `arm`, link `base`.
+    assert_eq!(out["frame"], "arm/arm/base", "{out}");
 }
 
 fn max_abs(out: &Value, phase: &str) -> f64 {

@@ -90,6 +90,14 @@ fn wrong_array_lengths_are_rejected() {
 }
 
 #[test]
+fn increments_beyond_one_control_step_are_rejected() {
+    // Issue 10, finding 1: `[1e308] * 7` used to be applied (clamped silently to the limits).
+    let (out, _bridge) = scenario("too_large");
+    held(&out, "too_large");
+    assert_eq!(counter(&out, "rejected_too_large"), 2, "1e308 and 0.3 rad");
+}
+
+#[test]
 fn unknown_joint_names_are_rejected() {
     let (out, _bridge) = scenario("unknown_joint");
     held(&out, "unknown_joint");

@@ -119,8 +119,9 @@ fn rclpy_receives_every_topic() {
         assert!(Instant::now() < deadline, "no /tf received");
         std::thread::sleep(Duration::from_millis(20));
     };
-    // Base in odom, then one transform per URDF joint (2 arms x 8 + 2 wheel modules x 2 + 3 mounts).
-    assert_eq!(tf.transforms.len(), 1 + 2 * 8 + 2 * 2 + 3);
+    // Base in odom, then one transform per moving joint (2 arms x 7 + 2 wheel modules x 2);
+    // the fixed ones (2 tool frames, 3 mounts) once on /tf_static (issue 10, finding 10).
+    assert_eq!(tf.transforms.len(), 1 + 2 * 7 + 2 * 2);
     assert_eq!(tf.transforms[0].header.frame_id, "dragon/odom");
     assert!(tf
         .transforms
@@ -129,7 +130,24 @@ fn rclpy_receives_every_topic() {
     assert!(tf
         .transforms
         .iter()
-        .any(|t| t.child_frame_id == "dragon/arm0/ee"));
+        .any(|t| t.child_frame_id == "dragon/arm0/link7"));
+    // A late subscriber still gets the fixed transforms (latched).
+    let tf_static = node
+        .subscription::<TFMessage>("/tf_static", qos::latched())
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let fixed = loop {
+        if let Ok(Some((msg, _))) = tf_static.take() {
+            break msg;
+        }
+        assert!(Instant::now() < deadline, "no /tf_static received");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert_eq!(fixed.transforms.len(), 2 + 3);
+    assert!(fixed
+        .transforms
+        .iter()
+        .any(|t| t.child_frame_id == "dragon/arm0/ee" && t.header.frame_id == "dragon/arm0/link7"));
     assert!(bridge.alive());
 }
 
@@ -152,7 +170,9 @@ fn rclpy_publishers_drive_the_robot() {
             "--joint",
             "0",
             "--increment",
-            "0.2",
+            "0.05",
+            "--count",
+            "4",
             "--wheel-velocity",
             "2.0",
             "--drive-seconds",
@@ -164,7 +184,7 @@ fn rclpy_publishers_drive_the_robot() {
     let moved = f(&out["q1"][0]) - f(&out["q0"][0]);
     assert!(
         (moved - 0.2).abs() < 0.01,
-        "joint1 moved {moved} rad for a 0.2 rad increment"
+        "joint1 moved {moved} rad for four 0.05 rad increments"
     );
     for j in 1..7 {
         let d = f(&out["q1"][j]) - f(&out["q0"][j]);
@@ -193,4 +213,43 @@ fn a_late_subscriber_receives_the_robot_description() {
     );
     assert!(out["description_chars"].as_u64().unwrap() > 3000, "{out}");
     assert!(out["starts_with"].as_str().unwrap().starts_with("<?xml"));
+}
+
+/// Issue 10, finding 9: +2 rad/s on all three of Tricycle's wheel modules drove the base
+/// backwards (-0.53 m/s along its x axis). Positive drives along +x on every robot.
+#[test]
+fn a_positive_wheel_velocity_drives_every_robot_forward() {
+    for (robot, arm, wheels) in [
+        ("tricycle", "arm0", "wheel0,wheel1,wheel2"),
+        ("dragon", "arm0", "front_wheel,rear_wheel"),
+    ] {
+        let domain = fresh_domain();
+        let _bridge = Bridge::start(robot, domain, REALTIME);
+        let out = peer(
+            domain,
+            &[
+                "drive",
+                "--robot",
+                robot,
+                "--arm",
+                arm,
+                "--wheels",
+                wheels,
+                "--increment",
+                "0",
+                "--wheel-velocity",
+                "2.0",
+                "--drive-seconds",
+                "2",
+            ],
+            DEADLINE,
+        );
+        assert!(out.get("error").is_none(), "{robot}: {out}");
+        let forward = f(&out["base_forward_m"]);
+        eprintln!("{robot}: {forward:.3} m along the base x axis in 2 s at +2 rad/s");
+        assert!(
+            forward > 0.3,
+            "{robot} drove {forward:.3} m along +x: {out}"
+        );
+    }
 }

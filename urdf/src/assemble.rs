@@ -77,6 +77,38 @@ impl RobotModel {
         )
     }
 
+    /// The sign that makes a positive wheel velocity [rad/s] drive `module` along the base's
+    /// +x axis with every module at home (the convention of `wheel_velocity` everywhere): a
+    /// wheel turning positively about its axis `a` rolls its centre along `a x up`, with up the
+    /// base's z axis. +1 for a module without wheels, or whose wheels roll sideways at home.
+    pub fn wheel_drive_sign(&self, module: &str) -> f64 {
+        let Some(m) = self.module(module) else {
+            return 1.0;
+        };
+        let Some(wheel) = m.velocity_joints().next() else {
+            return 1.0;
+        };
+        let Ok(tree) = crate::kinematics::KinematicTree::new(&self.urdf) else {
+            return 1.0;
+        };
+        let home = self.modules.iter().flat_map(|m| {
+            m.position_joints()
+                .zip(&m.home)
+                .map(|(a, q)| (a.joint.as_str(), *q))
+        });
+        let poses = tree.forward(&Isometry3::identity(), &tree.positions(home));
+        let Some(j) = tree.joint_index(&wheel.joint).map(|i| &tree.joints()[i]) else {
+            return 1.0;
+        };
+        let axis_b = (poses[j.parent_link] * j.origin).rotation * j.axis.into_inner();
+        let forward_b = axis_b.cross(&nalgebra::Vector3::z());
+        if forward_b.x < -1e-6 {
+            -1.0
+        } else {
+            1.0
+        }
+    }
+
     pub fn module(&self, name: &str) -> Option<&ModuleInstance> {
         self.modules.iter().find(|m| m.name == name)
     }

@@ -50,6 +50,13 @@ impl Actuator {
         q.clamp(self.lower, self.upper)
     }
 
+    /// The largest joint increment [rad] per control step at `control_hz` [Hz]: what the joint
+    /// can move in one step at its velocity limit. The skill's action scale, and the bound the
+    /// sim bridge holds increments from the wire to.
+    pub fn max_increment(&self, control_hz: f64) -> f64 {
+        self.velocity_limit / control_hz
+    }
+
     /// Clamps a velocity target [rad/s] to the velocity limit.
     pub fn clamp_velocity(&self, v: f64) -> f64 {
         v.clamp(-self.velocity_limit, self.velocity_limit)

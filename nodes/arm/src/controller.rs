@@ -1,8 +1,14 @@
 //! The arm node's control step, free of ROS: from the latest goal and joint state to the next
-//! joint targets. The observation is built by [`kumi_policies::observation::build`], the
-//! function the training environment uses, and the action is applied by
-//! [`ArmSkill::increments`] and [`kumi_engine::apply_increments`], as in training.
-
+//! command. The observation is built by [`kumi_policies::observation::build`], the function the
+//! training environment uses, and the action becomes increments by [`ArmSkill::increments`].
+//!
+//! **Who owns the servo targets.** Increments are applied to the targets by whoever holds them,
+//! through [`kumi_engine::apply_increments`] (the one rule: add, then clamp to the joint range).
+//! With the sim bridge, the bridge holds them: the node sends the skill's increments as they are
+//! and keeps no copy, so a `joint_set` from another publisher, a restarted bridge or a clamped
+//! command cannot leave the node computing from targets that no longer exist. With Motion Stack
+//! (absolute targets) the node holds them itself, starting from the measured joint angles and
+//! starting over from them whenever it resumes after holding.
 use kumi_engine::apply_increments;
 use kumi_model::Actuator;
 use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
@@ -29,10 +35,12 @@ pub enum Hold {
 /// What one step decided.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Command {
-    /// Increments [rad] since the previous step (zero when holding), already clamped so that
-    /// `targets` stay within the joint limits.
+    /// The skill's increments [rad] for this step (zero when holding), for the holder of the
+    /// targets to apply with [`kumi_engine::apply_increments`].
     pub increments: [f64; JOINTS],
-    /// Absolute joint targets [rad]; `None` until a joint state has been seen.
+    /// Absolute joint targets [rad] when the node holds the targets itself (Motion Stack):
+    /// the increments applied to the node's own targets. `None` until a joint state has been
+    /// seen.
     pub targets: Option<[f64; JOINTS]>,
     /// Set when the step held.
     pub hold: Option<Hold>,
@@ -48,6 +56,8 @@ pub struct ArmController {
     stale_after_s: f64,
     goal: Option<Goal>,
     joints: Option<(Joints, f64)>,
+    /// The node's own targets (used by Motion Stack output); cleared by every hold, so that
+    /// they restart from the measured joint angles.
     targets: Option<[f64; JOINTS]>,
 }
 
@@ -89,6 +99,14 @@ impl ArmController {
         self.joints = Some((joints, t_s));
     }
 
+    /// Forgets the joint state and the node's targets (the time base changed, or the
+    /// simulator restarted): the next step holds until a new joint state arrives. The goal is
+    /// kept.
+    pub fn forget_state(&mut self) {
+        self.joints = None;
+        self.targets = None;
+    }
+
     /// The latest joint state and when it was measured [s].
     pub fn joints(&self) -> Option<&(Joints, f64)> {
         self.joints.as_ref()
@@ -100,10 +118,13 @@ impl ArmController {
         Some(observation::build(&j.q, &j.qd, self.goal.as_ref()?))
     }
 
-    fn hold(&self, why: Hold) -> Command {
+    /// A hold: zero increments; the node's targets (Motion Stack) stay where they are for
+    /// this command and restart from the measured angles when the policy runs again.
+    fn hold(&mut self, why: Hold) -> Command {
+        let targets = self.targets.take().or(self.joints.map(|(j, _)| j.q));
         Command {
             increments: [0.0; JOINTS],
-            targets: self.targets,
+            targets,
             hold: Some(why),
             observation: None,
         }
@@ -114,8 +135,6 @@ impl ArmController {
         let Some((joints, t)) = self.joints else {
             return self.hold(Hold::NoJointState);
         };
-        // Targets start where the arm is, as in training (reset sets them to the joint angles).
-        let targets = *self.targets.get_or_insert(joints.q);
         let age_s = now_s - t;
         if age_s > self.stale_after_s {
             return self.hold(Hold::Stale { age_s });
@@ -127,13 +146,14 @@ impl ArmController {
             Ok(a) => a,
             Err(e) => return self.hold(Hold::PolicyFailed(e)),
         };
+        // The node's targets start where the arm is, as in training (reset sets them to the
+        // joint angles).
+        let targets = self.targets.unwrap_or(joints.q);
+        let increments = self.skill.increments(&action);
         let actuators: Vec<&Actuator> = self.actuators.iter().collect();
-        let next = apply_increments(&targets, &self.skill.increments(&action), &actuators)
-            .expect("increments are finite and sized for the module");
-        let mut new_targets = [0.0; JOINTS];
-        new_targets.copy_from_slice(&next);
-        let increments = std::array::from_fn(|i| new_targets[i] - targets[i]);
-        self.targets = Some(new_targets);
+        let next = apply_increments(&targets, &increments, &actuators)
+            .expect("the skill's increments are finite and sized for the module");
+        self.targets = Some(std::array::from_fn(|i| next[i]));
         Command {
             increments,
             targets: self.targets,
@@ -217,22 +237,45 @@ mod tests {
     }
 
     #[test]
-    fn runs_the_policy_and_clamps_to_the_limits() {
+    fn sends_the_skills_increments_and_clamps_only_its_own_targets() {
         let mut c = controller(Box::new(|_| Ok([1.0, -1.0, -0.5, 0.0, 0.0, 0.0, 0.0])));
         c.set_goal(goal());
         c.set_joints(joints(0.98), 0.0);
         let cmd = c.step(0.0);
         assert!(cmd.hold.is_none());
-        // joint1 would go to 1.03: clamped at the limit 1.0, so its increment is 0.02.
-        assert!((cmd.increments[0] - 0.02).abs() < 1e-12);
-        assert!((cmd.increments[1] + 0.05).abs() < 1e-12);
-        assert!((cmd.increments[2] + 0.025).abs() < 1e-12);
-        assert_eq!(cmd.targets.unwrap()[0], 1.0);
+        // The increments are the skill's (velocity limit / rate = 0.05 rad per unit): the
+        // holder of the targets clamps them, the node does not second-guess where they are.
+        assert_eq!(cmd.increments[..3], [0.05, -0.05, -0.025]);
+        // Its own targets (Motion Stack) go through the one rule: joint1 stops at 1.0.
+        let targets = cmd.targets.unwrap();
+        assert_eq!(targets[0], 1.0);
+        assert!((targets[1] - 0.93).abs() < 1e-12);
         // The observation is the shared builder's.
         assert_eq!(
             cmd.observation,
             Some(observation::build(&[0.98; 7], &[0.0; 7], &goal()))
         );
+        // Targets accumulate while the policy runs ...
+        let next = c.step(0.0).targets.unwrap();
+        assert!((next[1] - 0.88).abs() < 1e-12);
+    }
+
+    #[test]
+    fn targets_restart_from_the_measured_angles_after_a_hold() {
+        let mut c = controller(Box::new(|_| Ok([-1.0; JOINTS])));
+        c.set_goal(goal());
+        c.set_joints(joints(0.5), 0.0);
+        c.step(0.0);
+        assert!((c.step(0.0).targets.unwrap()[0] - 0.4).abs() < 1e-12);
+        // Stale: hold, and forget the node's targets.
+        assert!(matches!(c.step(1.0).hold, Some(Hold::Stale { .. })));
+        c.set_joints(joints(0.2), 1.0);
+        assert!((c.step(1.0).targets.unwrap()[0] - 0.15).abs() < 1e-12);
+        // A restarted simulator: the state is forgotten, nothing is commanded until a new
+        // joint state arrives; the goal is kept.
+        c.forget_state();
+        assert_eq!(c.step(0.0).hold, Some(Hold::NoJointState));
+        assert!(c.goal().is_some());
     }
 
     #[test]

@@ -3,15 +3,17 @@
 //! - [`goal`]: validating a `geometry_msgs/PoseStamped` goal (frame, finiteness, quaternion,
 //!   workspace).
 //! - [`joints`]: reading the module's `sensor_msgs/JointState` in the skill's joint order.
-//! - [`controller`]: the pure control step: hold, or observation -> policy -> increments,
-//!   clamped to the joint limits. It builds the observation with the same function training
+//! - [`controller`]: the pure control step: hold, or observation -> policy -> increments
+//!   (the holder of the servo targets applies them). It builds the observation with the same function training
 //!   uses ([`kumi_policies::observation::build`]).
-//! - [`schedule`]: when the node acts (sim time or wall time).
+//! - [`schedule`]: when the node acts (sim time or wall time), and sim time that restarts.
+//! - [`report`]: what it reports on `/diagnostics`.
 //! - [`run`]: the ROS 2 shell around them.
 
 pub mod controller;
 pub mod goal;
 pub mod joints;
+pub mod report;
 pub mod run;
 pub mod schedule;
 

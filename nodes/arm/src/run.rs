@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use kumi_model::{Actuator, RobotModel};
 use kumi_msgs::builtin_interfaces::Time;
+use kumi_msgs::diagnostic_msgs::DiagnosticArray;
 use kumi_msgs::geometry_msgs::PoseStamped;
 use kumi_msgs::rosgraph_msgs::Clock;
 use kumi_msgs::sensor_msgs::JointState;
@@ -27,7 +28,8 @@ use tracing::{debug, info, warn};
 use crate::controller::{ArmController, Hold};
 use crate::goal::GoalRules;
 use crate::joints;
-use crate::schedule::Schedule;
+use crate::report::Report;
+use crate::schedule::{Schedule, SimClock};
 
 /// What the node publishes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -130,13 +132,11 @@ impl Prepared {
                 config.stale_after_s,
             ),
             rules: GoalRules {
-                frames: vec![
-                    module.root_link.clone(),
-                    format!("{}/{}", config.robot, module.root_link),
-                ],
+                // The module's base frame as `/tf` names it (empty: the same, by convention).
+                frames: vec![topics::frame(&config.robot, &module.root_link)],
                 reach,
             },
-            base_frame: module.root_link.clone(),
+            base_frame: topics::frame(&config.robot, &module.root_link),
             kinematics,
             control_hz,
         })
@@ -155,6 +155,7 @@ struct Io {
     increments: Option<Publisher<Float64MultiArray>>,
     joint_set: Option<Publisher<JointState>>,
     ee_pose: Publisher<PoseStamped>,
+    diagnostics: Publisher<DiagnosticArray>,
 }
 
 /// Runs the node until `shutdown` is set.
@@ -179,6 +180,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
             Output::Increments => None,
         },
         ee_pose: node.publisher(&topics::ee_pose(robot, module), qos::default())?,
+        diagnostics: node.publisher(topics::DIAGNOSTICS, qos::default())?,
     };
     info!(
         "arm node up: /{robot}/{module}, output {:?}, clock {:?}, domain {}",
@@ -189,24 +191,39 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
 
     let start = Instant::now();
     let mut schedule = Schedule::new(prepared.control_hz);
-    let mut sim_now: Option<f64> = None;
+    let mut clock = SimClock::default();
     let mut log = RateLimited::new(Duration::from_secs(1));
     let mut hold_log = RateLimited::new(Duration::from_secs(2));
+    let mut goal_log = RateLimited::new(Duration::from_secs(1));
     let mut latest_stamp = Time::default();
+    let mut report = Report::default();
+    let mut report_at = Instant::now();
 
     while !shutdown.load(Ordering::Relaxed) {
         while let Ok(Some((c, _))) = io.clock.take() {
-            if config.clock != ClockSource::Wall {
-                sim_now = Some(c.clock.seconds());
+            if config.clock == ClockSource::Wall {
+                continue;
+            }
+            let t = c.clock.seconds();
+            if let Some(before) = clock.clock(t) {
+                // A new simulator: what was measured in the old one's time means nothing now.
+                info!("{module}: sim time went back from {before:.3} s to {t:.3} s (a restarted simulator); starting over from its next joint state");
+                report.sim_restarts += 1;
+                schedule.forget();
+                prepared.controller.forget_state();
             }
         }
         let sim = match config.clock {
             ClockSource::Sim => true,
             ClockSource::Wall => false,
-            ClockSource::Auto => sim_now.is_some(),
+            ClockSource::Auto => clock.now_s().is_some(),
         };
-        if schedule.use_sim_time(sim) && sim {
-            info!("{module}: using sim time from /clock");
+        if schedule.use_sim_time(sim) {
+            // A joint state stamped in the other time base would look ages old (or new).
+            prepared.controller.forget_state();
+            if sim {
+                info!("{module}: using sim time from /clock");
+            }
         }
         let wall_now = start.elapsed().as_secs_f64();
 
@@ -214,16 +231,34 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
             match io.goal.take() {
                 Ok(Some((msg, _))) => match prepared.rules.accept(&msg) {
                     Ok(goal) => {
-                        info!(
-                            "{module}: new goal at ({:.3}, {:.3}, {:.3}) m",
-                            goal.position_b.x, goal.position_b.y, goal.position_b.z
-                        );
+                        report.goals_accepted += 1;
+                        let p = goal.position_b;
+                        match goal_log.check(Instant::now()) {
+                            Some(0) => info!(
+                                "{module}: new goal at ({:.3}, {:.3}, {:.3}) m",
+                                p.x, p.y, p.z
+                            ),
+                            Some(n) => info!(
+                                "{module}: new goal at ({:.3}, {:.3}, {:.3}) m ({n} more in the last second)",
+                                p.x, p.y, p.z
+                            ),
+                            None => debug!(
+                                "{module}: new goal at ({:.3}, {:.3}, {:.3}) m",
+                                p.x, p.y, p.z
+                            ),
+                        }
                         prepared.controller.set_goal(goal);
                     }
-                    Err(why) => warn!("{module}: goal rejected: {why}"),
+                    Err(why) => {
+                        report.goals_rejected += 1;
+                        if let Some(n) = log.check(Instant::now()) {
+                            warn!("{module}: goal rejected: {why} ({n} more suppressed)");
+                        }
+                    }
                 },
                 Ok(None) => break,
                 Err(e) => {
+                    report.malformed += 1;
                     if log.check(Instant::now()).is_some() {
                         warn!("{module}: malformed goal message dropped: {e:?}");
                     }
@@ -241,15 +276,14 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                                 wall_now
                             };
                             if sim {
-                                // A joint state stamped in the future of /clock means the
-                                // clock has not arrived yet: it is the newest time there is.
-                                sim_now = Some(sim_now.map_or(t, |c| c.max(t)));
+                                clock.stamp(t);
                             }
                             schedule.joint_state(t);
                             latest_stamp = msg.header.stamp;
                             prepared.controller.set_joints(j, t);
                         }
                         Err(why) => {
+                            report.joint_states_rejected += 1;
                             if let Some(n) = log.check(Instant::now()) {
                                 warn!(
                                     "{module}: joint state rejected: {why} ({n} more suppressed)"
@@ -260,6 +294,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                 }
                 Ok(None) => break,
                 Err(e) => {
+                    report.malformed += 1;
                     if log.check(Instant::now()).is_some() {
                         warn!("{module}: malformed joint state dropped: {e:?}");
                     }
@@ -268,7 +303,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         }
         // After the joint states: in sim time, their stamps may have moved the clock on.
         let now = if sim {
-            sim_now.unwrap_or(0.0)
+            clock.now_s().unwrap_or(0.0)
         } else {
             wall_now
         };
@@ -276,6 +311,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         let measured_at = prepared.controller.joints().map(|(_, t)| *t);
         if schedule.due(now, measured_at) {
             let cmd = prepared.controller.step(now);
+            report.step(cmd.hold.as_ref());
             let warning = match &cmd.hold {
                 Some(Hold::Stale { age_s }) => {
                     Some(format!("joint states are {age_s:.2} s old; holding"))
@@ -319,6 +355,16 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                     pose: geometry::pose(&pose),
                 });
             }
+        }
+        if report_at.elapsed() >= Duration::from_secs(1) {
+            report_at = Instant::now();
+            let _ = io.diagnostics.publish(DiagnosticArray {
+                header: Header {
+                    stamp: Time::from_seconds(now),
+                    frame_id: String::new(),
+                },
+                status: vec![report.status(robot, module)],
+            });
         }
         std::thread::sleep(Duration::from_micros(200));
     }

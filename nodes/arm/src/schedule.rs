@@ -33,10 +33,15 @@ impl Schedule {
             return false;
         }
         self.sim = sim;
+        self.forget();
+        true
+    }
+
+    /// Forgets the times kept so far (the time base changed, or sim time went back).
+    pub fn forget(&mut self) {
         self.last_acted_stamp = f64::NEG_INFINITY;
         self.last_step_at = f64::NEG_INFINITY;
         self.fresh = false;
-        true
     }
 
     pub fn sim(&self) -> bool {
@@ -69,6 +74,44 @@ impl Schedule {
     }
 }
 
+/// Sim time as the node knows it: the newest of `/clock` and the joint-state stamps. A `/clock`
+/// that goes back means a new simulator (a restarted bridge): time starts over from it.
+#[derive(Debug, Clone, Default)]
+pub struct SimClock {
+    now_s: Option<f64>,
+}
+
+/// How far `/clock` may go back [s] before it counts as a restart (stamps built from step
+/// counts may differ by rounding).
+pub const BACKWARDS_TOLERANCE_S: f64 = 1e-6;
+
+impl SimClock {
+    /// A `/clock` message at `t_s`; returns the time it replaced when time went back.
+    pub fn clock(&mut self, t_s: f64) -> Option<f64> {
+        match self.now_s {
+            Some(now) if t_s < now - BACKWARDS_TOLERANCE_S => {
+                self.now_s = Some(t_s);
+                Some(now)
+            }
+            _ => {
+                self.stamp(t_s);
+                None
+            }
+        }
+    }
+
+    /// A joint state stamped `t_s` [s]: stamped in the future of `/clock`, it means the clock
+    /// has not arrived yet, so it is the newest time there is.
+    pub fn stamp(&mut self, t_s: f64) {
+        self.now_s = Some(self.now_s.map_or(t_s, |c| c.max(t_s)));
+    }
+
+    /// Sim time [s]; `None` before anything arrived.
+    pub fn now_s(&self) -> Option<f64> {
+        self.now_s
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,6 +140,39 @@ mod tests {
         s.joint_state(5.01);
         assert!(!s.due(5.05, Some(5.01)));
         assert!(s.due(5.1, Some(5.01)));
+    }
+
+    #[test]
+    fn a_clock_that_goes_back_restarts_sim_time() {
+        let mut c = SimClock::default();
+        assert_eq!(c.now_s(), None);
+        assert_eq!(c.clock(100.0), None);
+        // A joint state of the new bridge arrives before its clock: time does not go back yet.
+        c.stamp(0.0);
+        assert_eq!(c.now_s(), Some(100.0));
+        // Its clock does: the old time is reported and forgotten.
+        assert_eq!(c.clock(0.0), Some(100.0));
+        assert_eq!(c.now_s(), Some(0.0));
+        c.stamp(1.0 / 30.0);
+        assert_eq!(
+            c.clock(1.0 / 30.0 - 1e-9),
+            None,
+            "rounding is not a restart"
+        );
+        assert_eq!(c.now_s(), Some(1.0 / 30.0));
+        // After a restart the schedule acts on the first joint state of the new time.
+        let mut s = Schedule::new(30.0);
+        s.use_sim_time(true);
+        s.joint_state(100.0);
+        assert!(s.due(100.0, Some(100.0)));
+        s.joint_state(0.0);
+        assert!(
+            !s.due(0.0, Some(0.0)),
+            "without forgetting, it would wait 100 s"
+        );
+        s.forget();
+        s.joint_state(0.0);
+        assert!(s.due(0.0, Some(0.0)));
     }
 
     #[test]

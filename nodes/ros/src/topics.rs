@@ -56,6 +56,22 @@ pub const CLOCK: &str = "/clock";
 /// `/diagnostics`: `diagnostic_msgs/DiagnosticArray`.
 pub const DIAGNOSTICS: &str = "/diagnostics";
 
+/// `/<robot>/<module>/joint_targets`: `sensor_msgs/JointState`, the position targets [rad] the
+/// simulator's servos follow (what increments are added to), by joint name.
+pub fn joint_targets(robot: &str, module: &str) -> String {
+    format!("/{robot}/{module}/joint_targets")
+}
+
+/// `/tf_static`: `tf2_msgs/TFMessage`, fixed joints, latched.
+pub const TF_STATIC: &str = "/tf_static";
+
+/// The tf frame of a link: every frame of a robot is prefixed by its name
+/// (`tricycle/arm0/base`), so that several robots share one `/tf`. Every frame id kumi
+/// publishes or accepts is built here.
+pub fn frame(robot: &str, link: &str) -> String {
+    format!("{robot}/{link}")
+}
+
 /// The fixed frame that odometry and `/tf` roots are expressed in, per robot: `<robot>/odom`.
 pub fn odom_frame(robot: &str) -> String {
     format!("{robot}/odom")

@@ -15,6 +15,8 @@ pub struct ServoBank {
     states: Vec<ServoState>,
     /// Each module's name and actuator index range.
     modules: Vec<(String, Range<usize>)>,
+    /// Each module's [`RobotModel::wheel_drive_sign`], in the order of `modules`.
+    drive_signs: Vec<f64>,
 }
 
 /// What the PD law of one servo tracks during one physics step.
@@ -44,7 +46,22 @@ impl ServoBank {
             actuators,
             states,
             modules,
+            drive_signs: model
+                .modules
+                .iter()
+                .map(|m| model.wheel_drive_sign(&m.name))
+                .collect(),
         }
+    }
+
+    /// The sign a module's wheel velocity is multiplied by so that positive drives the base
+    /// along +x at home ([`RobotModel::wheel_drive_sign`]).
+    pub fn drive_sign(&self, module: &str) -> Result<f64, SimError> {
+        self.modules
+            .iter()
+            .position(|(name, _)| name == module)
+            .map(|i| self.drive_signs[i])
+            .ok_or_else(|| SimError::UnknownModule(module.to_string()))
     }
 
     /// Every actuator, in the order of every per-joint vector of [`crate::SimWorld`].

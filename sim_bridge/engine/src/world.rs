@@ -214,11 +214,14 @@ pub trait SimWorld: Send {
     }
 
     /// Commands one wheel velocity [rad/s] for both wheels of a wheel module, clamped to the
-    /// velocity limit.
+    /// velocity limit. Positive drives the base along its +x axis with every module at home,
+    /// however the module is mounted ([`kumi_model::RobotModel::wheel_drive_sign`]); the joint
+    /// commands carry that sign.
     fn set_wheel_velocity(&mut self, module: &str, velocity: f64) -> Result<(), SimError> {
         let n = self.servos().velocity_joints(module)?;
+        let sign = self.servos().drive_sign(module)?;
         self.servos_mut()
-            .set(module, ActuatorMode::Velocity, &vec![velocity; n])
+            .set(module, ActuatorMode::Velocity, &vec![sign * velocity; n])
     }
 
     /// The current commands, in actuator order: position targets [rad] or velocities [rad/s].

@@ -26,6 +26,13 @@ pub enum Rejection {
         module: String,
         what: &'static str,
     },
+    /// An increment larger than its joint can move in one control step.
+    TooLarge {
+        module: String,
+        joint: String,
+        increment_rad: f64,
+        limit_rad: f64,
+    },
 }
 
 impl Rejection {
@@ -36,6 +43,7 @@ impl Rejection {
             Rejection::WrongLength { .. } => "wrong_length",
             Rejection::UnknownJoint { .. } => "unknown_joint",
             Rejection::WrongModule { .. } => "wrong_module",
+            Rejection::TooLarge { .. } => "too_large",
         }
     }
 }
@@ -65,6 +73,15 @@ impl std::fmt::Display for Rejection {
                 f,
                 "{module}: rejected a {what} command: this module has no such joints"
             ),
+            Rejection::TooLarge {
+                module,
+                joint,
+                increment_rad,
+                limit_rad,
+            } => write!(
+                f,
+                "{module}: rejected increments: {increment_rad:e} rad for `{joint}` is more than it moves in one control step ({limit_rad:.4} rad)"
+            ),
         }
     }
 }
@@ -76,6 +93,8 @@ struct ModuleState {
     position_joints: Vec<String>,
     /// Their actuators (for ranges), in the same order.
     position_actuators: Vec<Actuator>,
+    /// The largest increment [rad] each may take per control step.
+    max_increments: Vec<f64>,
     has_wheels: bool,
     /// Position targets [rad] the module is following.
     targets: Vec<f64>,
@@ -108,6 +127,8 @@ pub struct Commands {
     modules: BTreeMap<String, ModuleState>,
     /// Commands older than this [s of sim time] make the module hold its position.
     stale_after_s: f64,
+    /// Accepted increments that took a target past its joint's range (clamped there).
+    clamped: u64,
 }
 
 /// A change for the simulator, produced by [`Commands`].
@@ -118,11 +139,13 @@ pub enum Update {
 }
 
 impl Commands {
-    /// Every module starts holding `home` (positions per module, in model order).
+    /// Every module starts holding `home` (positions per module, in model order); increments
+    /// are bounded by what each joint moves in one step at `control_hz` [Hz].
     pub fn new(
         model: &RobotModel,
         initial_positions: &BTreeMap<String, Vec<f64>>,
         stale_after_s: f64,
+        control_hz: f64,
     ) -> Self {
         let modules = model
             .modules
@@ -139,6 +162,10 @@ impl Commands {
                     ModuleState {
                         has_wheels: m.actuators.iter().any(|a| a.mode == ActuatorMode::Velocity),
                         position_actuators: m.position_joints().cloned().collect(),
+                        max_increments: m
+                            .position_joints()
+                            .map(|a| a.max_increment(control_hz))
+                            .collect(),
                         position_joints,
                         targets,
                         wheel_velocity: 0.0,
@@ -151,7 +178,13 @@ impl Commands {
         Self {
             modules,
             stale_after_s,
+            clamped: 0,
         }
+    }
+
+    /// How many accepted increments were clamped at a joint limit so far.
+    pub fn clamped(&self) -> u64 {
+        self.clamped
     }
 
     fn module(&mut self, module: &str, what: &'static str) -> Result<&mut ModuleState, Rejection> {
@@ -189,11 +222,30 @@ impl Commands {
                 module: module.to_string(),
             });
         }
+        // A tolerance of 1e-9 rad: a saturated skill action asks for exactly the limit.
+        if let Some(i) =
+            (0..increments.len()).find(|&i| increments[i].abs() > state.max_increments[i] + 1e-9)
+        {
+            return Err(Rejection::TooLarge {
+                module: module.to_string(),
+                joint: state.position_joints[i].clone(),
+                increment_rad: increments[i],
+                limit_rad: state.max_increments[i],
+            });
+        }
         let actuators: Vec<&Actuator> = state.position_actuators.iter().collect();
-        state.targets = apply_increments(&state.targets, increments, &actuators)
+        let next = apply_increments(&state.targets, increments, &actuators)
             .expect("lengths and values were checked above");
+        let clamped = next
+            .iter()
+            .zip(&state.targets)
+            .zip(increments)
+            .any(|((n, t), d)| *n != t + d);
+        state.targets = next;
         state.accept(now_s);
-        Ok(state.targets_update(module))
+        let update = state.targets_update(module);
+        self.clamped += u64::from(clamped);
+        Ok(update)
     }
 
     /// Absolute targets [rad] by joint name (`joint3` or `arm0/joint3`); joints not named keep
@@ -324,26 +376,58 @@ mod tests {
     use super::*;
     use kumi_model::{assemble, load_morphology, ModuleLibrary};
 
-    fn commands() -> Commands {
+    fn dragon() -> RobotModel {
         let library = ModuleLibrary::shipped();
-        let model = assemble(&load_morphology("dragon", &library).unwrap(), &library);
-        Commands::new(&model, &BTreeMap::new(), 0.5)
+        assemble(&load_morphology("dragon", &library).unwrap(), &library)
+    }
+
+    fn commands() -> Commands {
+        Commands::new(&dragon(), &BTreeMap::new(), 0.5, 30.0)
     }
 
     #[test]
     fn increments_accumulate_on_the_targets() {
         let mut c = commands();
-        c.increments("arm0", &[0.1; 7], 0.0).unwrap();
+        c.increments("arm0", &[0.05; 7], 0.0).unwrap();
         let u = c
-            .increments("arm0", &[0.05, 0.0, 0.0, 0.0, 0.0, 0.0, -0.1], 0.1)
+            .increments("arm0", &[0.03, 0.0, 0.0, 0.0, 0.0, 0.0, -0.05], 0.1)
             .unwrap();
         assert_eq!(
             u,
             Update::PositionTargets {
                 module: "arm0".into(),
-                targets: vec![0.15000000000000002, 0.1, 0.1, 0.1, 0.1, 0.1, 0.0]
+                targets: vec![0.08, 0.05, 0.05, 0.05, 0.05, 0.05, 0.0]
             }
         );
+        assert_eq!(c.clamped(), 0);
+    }
+
+    #[test]
+    fn increments_beyond_one_control_step_are_rejected_and_limits_counted() {
+        // Issue 10, finding 1: `[1e308] * 7` was applied, clamped to the limits, uncounted.
+        let mut c = commands();
+        let err = c.increments("arm0", &[1e308; 7], 0.0).unwrap_err();
+        assert_eq!(err.kind(), "too_large");
+        assert!(err.to_string().contains("arm0/joint1"), "{err}");
+        // 1.5 rad/s at 30 Hz: 0.05 rad per step, exactly the skill's saturated action.
+        assert_eq!(
+            c.increments("arm0", &[0.0, 0.0501, 0.0, 0.0, 0.0, 0.0, 0.0], 0.0)
+                .unwrap_err()
+                .kind(),
+            "too_large"
+        );
+        assert!(c.is_holding("arm0"), "nothing was accepted");
+        c.increments("arm0", &[-0.05; 7], 0.0).unwrap();
+        assert_eq!(c.clamped(), 0);
+        // joint2's range is [-2, 2]: from a target at 1.98 an increment of 0.05 clamps.
+        let targets = [("arm0".to_string(), vec![1.98; 7])].into();
+        let mut c = Commands::new(&dragon(), &targets, 0.5, 30.0);
+        let u = c.increments("arm0", &[0.05; 7], 0.0).unwrap();
+        let Update::PositionTargets { targets, .. } = u else {
+            panic!("{u:?}")
+        };
+        assert_eq!(targets[1], 2.0);
+        assert_eq!(c.clamped(), 1, "one message, counted once");
     }
 
     #[test]
@@ -456,7 +540,7 @@ mod tests {
     #[test]
     fn stale_commands_hold_position_once() {
         let mut c = commands();
-        c.increments("arm0", &[0.5; 7], 1.0).unwrap();
+        c.increments("arm0", &[0.05; 7], 1.0).unwrap();
         c.wheel_velocity("front_wheel", 3.0, 1.0).unwrap();
         let measured: BTreeMap<String, Vec<f64>> = [("arm0".to_string(), vec![0.2; 7])].into();
         assert!(
@@ -483,12 +567,12 @@ mod tests {
             "a holding module is not expired again"
         );
         // New increments build on the held position.
-        let u = c.increments("arm0", &[0.1; 7], 3.1).unwrap();
+        let u = c.increments("arm0", &[0.05; 7], 3.1).unwrap();
         assert_eq!(
             u,
             Update::PositionTargets {
                 module: "arm0".into(),
-                targets: vec![0.30000000000000004; 7]
+                targets: vec![0.25; 7]
             }
         );
     }

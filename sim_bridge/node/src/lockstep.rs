@@ -1,5 +1,10 @@
 //! Lockstep gating: the bridge advances one control step when every module that is being
 //! commanded has sent its command for the current tick, or when the timeout passes. Pure.
+//!
+//! Before the first command simulated time stands still, so a run always starts from the same
+//! state. Once commands have begun it never stands still again: when every controller goes
+//! quiet (a node died), the bridge steps once per timeout, so sim time goes on, the silent
+//! modules' commands go stale and they hold, and a restarted node finds a running clock.
 
 use std::collections::BTreeSet;
 
@@ -10,12 +15,15 @@ pub struct Lockstep {
     expected: BTreeSet<String>,
     /// Modules that sent a command since the last step.
     received: BTreeSet<String>,
+    /// Some command has arrived since the bridge started.
+    started: bool,
 }
 
 impl Lockstep {
     /// Records an accepted command from `module` for the current tick.
     pub fn received(&mut self, module: &str) {
         self.received.insert(module.to_string());
+        self.started = true;
     }
 
     /// The step may run: something was received and everything expected has arrived.
@@ -29,10 +37,10 @@ impl Lockstep {
         self.expected = std::mem::take(&mut self.received);
     }
 
-    /// Some module is being commanded: the timeout applies. Before the first command, and after
-    /// every controller has gone quiet, the bridge waits (simulated time stands still).
+    /// Commands have begun: the timeout applies. Before the first command the bridge waits
+    /// (simulated time stands still).
     pub fn active(&self) -> bool {
-        !self.expected.is_empty() || !self.received.is_empty()
+        self.started
     }
 
     /// Modules the bridge is waiting for.
@@ -68,10 +76,11 @@ mod tests {
         l.stepped();
         l.received("arm0");
         assert!(l.ready());
-        // Everyone goes quiet: after one timeout step the bridge idles.
+        // Everyone goes quiet (a node died): the bridge keeps stepping on the timeout, waiting
+        // for nobody, so that sim time goes on and the silent modules hold.
         l.stepped();
-        assert!(l.active());
+        assert_eq!(l.missing(), vec!["arm0".to_string()]);
         l.stepped();
-        assert!(!l.active());
+        assert!(l.active() && !l.ready() && l.missing().is_empty());
     }
 }

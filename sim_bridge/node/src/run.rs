@@ -1,6 +1,6 @@
 //! The bridge's event loop.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -29,8 +29,10 @@ pub enum Mode {
     RealTime { factor: f64 },
     /// One control step when every commanded module has sent its command for the tick, or when
     /// `timeout` passes without them; as fast as the consumers allow. Before the first command
-    /// (and once every controller has gone quiet) simulated time stands still and the current
-    /// state is republished every `timeout`, so a run always starts from the same state.
+    /// simulated time stands still and the current state is republished every `timeout`, so a
+    /// run always starts from the same state; after it, a controller that goes silent is
+    /// logged, counted on `/diagnostics` and stepped without, so that it holds once its
+    /// commands go stale ([`Lockstep`]).
     Lockstep { timeout: Duration },
 }
 
@@ -86,21 +88,30 @@ enum Incoming {
 #[derive(Default)]
 struct Counters {
     by_kind: BTreeMap<&'static str, u64>,
+    /// Targets set absolutely that the simulator clamped to a joint's range.
     clamped: u64,
+    /// Increments that took a target past its range ([`Commands::clamped`]).
+    increments_clamped: u64,
     stale_holds: u64,
+    /// Lockstep steps that ran on the timeout.
+    lockstep_timeouts: u64,
+    /// Modules a lockstep step waited for in vain that have not spoken since.
+    lockstep_silent: BTreeSet<String>,
 }
 
 /// The ROS side of the bridge: publishers, subscriptions.
 struct Io {
     joint_states: Vec<(String, Publisher<JointState>)>,
+    joint_targets: Vec<(String, Publisher<JointState>)>,
     odom: Publisher<kumi_msgs::nav_msgs::Odometry>,
     imu: Publisher<kumi_msgs::sensor_msgs::Imu>,
     tf: Publisher<kumi_msgs::tf2_msgs::TFMessage>,
     clock: Publisher<Clock>,
     diagnostics: Publisher<DiagnosticArray>,
     inputs: Vec<ModuleInputs>,
-    // Kept alive: the description is latched.
+    // Kept alive: the description and the fixed transforms are latched.
     _description: Publisher<StringMsg>,
+    _tf_static: Publisher<kumi_msgs::tf2_msgs::TFMessage>,
 }
 
 fn check_config(config: &BridgeConfig) -> Result<(), BridgeError> {
@@ -143,9 +154,14 @@ fn refuse_duplicates(node: &RosNode, config: &BridgeConfig) -> Result<(), Bridge
     Ok(())
 }
 
-fn open_io(node: &mut RosNode, config: &BridgeConfig) -> Result<Io, BridgeError> {
+fn open_io(
+    node: &mut RosNode,
+    config: &BridgeConfig,
+    tree: &KinematicTree,
+) -> Result<Io, BridgeError> {
     let robot = &config.robot;
     let mut joint_states = Vec::new();
+    let mut joint_targets = Vec::new();
     let mut inputs = Vec::new();
     for m in &config.model.modules {
         if m.actuators.is_empty() {
@@ -157,6 +173,12 @@ fn open_io(node: &mut RosNode, config: &BridgeConfig) -> Result<Io, BridgeError>
         ));
         let has_position = m.actuators.iter().any(|a| a.mode == ActuatorMode::Position);
         let has_wheels = m.actuators.iter().any(|a| a.mode == ActuatorMode::Velocity);
+        if has_position {
+            joint_targets.push((
+                m.name.clone(),
+                node.publisher(&topics::joint_targets(robot, &m.name), qos::default())?,
+            ));
+        }
         inputs.push(ModuleInputs {
             name: m.name.clone(),
             increments: if has_position {
@@ -184,8 +206,13 @@ fn open_io(node: &mut RosNode, config: &BridgeConfig) -> Result<Io, BridgeError>
     }) {
         warn!("could not publish the robot description: {e:?}");
     }
+    let tf_static = node.publisher(topics::TF_STATIC, qos::latched())?;
+    if let Err(e) = tf_static.publish(state::static_transforms(tree, robot)) {
+        warn!("could not publish the fixed transforms: {e:?}");
+    }
     Ok(Io {
         joint_states,
+        joint_targets,
         odom: node.publisher(&topics::odom(robot), qos::default())?,
         imu: node.publisher(&topics::imu(robot), qos::default())?,
         tf: node.publisher(topics::TF, qos::default())?,
@@ -193,6 +220,7 @@ fn open_io(node: &mut RosNode, config: &BridgeConfig) -> Result<Io, BridgeError>
         diagnostics: node.publisher(topics::DIAGNOSTICS, qos::default())?,
         inputs,
         _description: description,
+        _tf_static: tf_static,
     })
 }
 
@@ -249,7 +277,8 @@ fn apply(
         Update::WheelVelocity { module, velocity } => {
             world.set_wheel_velocity(module, *velocity)?;
             let range = world.module_range(module)?;
-            Ok(world.commands()[range.start] != *velocity)
+            // The joint command carries the module's drive sign: compare magnitudes.
+            Ok(world.commands()[range.start].abs() != velocity.abs())
         }
     }
 }
@@ -289,7 +318,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     )?;
 
     refuse_duplicates(&node, &config)?;
-    let io = open_io(&mut node, &config)?;
+    let io = open_io(&mut node, &config, &tree)?;
     info!(
         robot = %config.robot,
         domain = node.domain_id(),
@@ -304,6 +333,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         &model,
         &module_positions(world.as_ref(), &model),
         config.stale_after_s,
+        world.config().control_hz,
     );
     let mut lockstep = Lockstep::default();
     let mut counters = Counters::default();
@@ -324,6 +354,11 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         for (module, publisher) in &io.joint_states {
             if let Some(js) = state::joint_state(world, module, stamp) {
                 let _ = publisher.publish(js);
+            }
+        }
+        for (module, publisher) in &io.joint_targets {
+            if let Some(targets) = state::joint_targets(world, module, stamp) {
+                let _ = publisher.publish(targets);
             }
         }
         let _ = io.odom.publish(state::odometry(world, robot, stamp));
@@ -350,6 +385,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
                         counters.clamped +=
                             u64::from(apply(world.as_mut(), &mut commands, &update)?);
                         lockstep.received(&inputs.name);
+                        counters.lockstep_silent.remove(&inputs.name);
                     }
                     Err(rejection) => {
                         *counters.by_kind.entry(rejection.kind()).or_default() += 1;
@@ -372,6 +408,20 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             }
         };
         if due {
+            if let Mode::Lockstep { timeout } = config.mode {
+                let silent = lockstep.missing();
+                if !lockstep.ready() {
+                    counters.lockstep_timeouts += 1;
+                    if !silent.is_empty() {
+                        warn!(
+                            "lockstep: no command from {} within {timeout:?}; stepping without (they hold after {} s of sim time)",
+                            silent.join(", "),
+                            config.stale_after_s
+                        );
+                    }
+                }
+                counters.lockstep_silent.extend(silent);
+            }
             for update in commands.expire(now_s, &module_positions(world.as_ref(), &model)) {
                 counters.stale_holds += 1;
                 warn!(
@@ -401,6 +451,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         if Instant::now() >= diag_at {
             let (since, steps_then) = diag_window;
             let rtf = (steps - steps_then) as f64 * control_dt / since.elapsed().as_secs_f64();
+            counters.increments_clamped = commands.clamped();
             let _ = io.diagnostics.publish(diagnostics(
                 &config, steps, control_dt, rtf, &counters, malformed, start,
             ));
@@ -485,11 +536,24 @@ fn diagnostics(
         },
         KeyValue {
             key: "clamped".into(),
-            value: counters.clamped.to_string(),
+            value: (counters.clamped + counters.increments_clamped).to_string(),
         },
         KeyValue {
             key: "stale_holds".into(),
             value: counters.stale_holds.to_string(),
+        },
+        KeyValue {
+            key: "lockstep_timeouts".into(),
+            value: counters.lockstep_timeouts.to_string(),
+        },
+        KeyValue {
+            key: "lockstep_silent".into(),
+            value: counters
+                .lockstep_silent
+                .iter()
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(","),
         },
     ];
     for kind in [
@@ -497,6 +561,7 @@ fn diagnostics(
         "wrong_length",
         "unknown_joint",
         "wrong_module",
+        "too_large",
     ] {
         values.push(KeyValue {
             key: format!("rejected_{kind}"),

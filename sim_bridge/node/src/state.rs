@@ -1,6 +1,6 @@
 //! The simulator's state as ROS messages. Pure functions of the world; the node publishes them.
 
-use kumi_model::kinematics::KinematicTree;
+use kumi_model::kinematics::{JointKind, KinematicTree};
 use kumi_msgs::builtin_interfaces::Time;
 use kumi_msgs::geometry_msgs::{PoseWithCovariance, TransformStamped, Twist, TwistWithCovariance};
 use kumi_msgs::nav_msgs::Odometry;
@@ -8,17 +8,12 @@ use kumi_msgs::sensor_msgs::{Imu, JointState};
 use kumi_msgs::std_msgs::Header;
 use kumi_msgs::tf2_msgs::TFMessage;
 use kumi_ros::geometry;
+use kumi_ros::topics::frame;
 use kumi_worlds::SimWorld;
 use nalgebra::Vector3;
 
 /// Gravity in the world frame [m/s^2].
 const GRAVITY_W: Vector3<f64> = Vector3::new(0.0, 0.0, -9.81);
-
-/// A tf frame id: every frame of a robot is prefixed by its name (`tricycle/arm0/link3`), so
-/// that several robots share one `/tf`.
-pub fn frame(robot: &str, link: &str) -> String {
-    format!("{robot}/{link}")
-}
 
 fn header(stamp: Time, frame_id: String) -> Header {
     Header { stamp, frame_id }
@@ -35,6 +30,28 @@ pub fn joint_state(world: &dyn SimWorld, module: &str, stamp: Time) -> Option<Jo
         name: names[range.clone()].iter().map(|s| s.to_string()).collect(),
         position: q[range.clone()].to_vec(),
         velocity: v[range].to_vec(),
+        effort: Vec::new(),
+    })
+}
+
+/// The position targets [rad] one module's servos follow (what increments are added to), by
+/// joint name; `None` for a module without position joints.
+pub fn joint_targets(world: &dyn SimWorld, module: &str, stamp: Time) -> Option<JointState> {
+    let range = world.module_range(module).ok()?;
+    let names = world.actuator_names();
+    let commands = world.commands();
+    let actuators = world.servos().actuators();
+    let position: Vec<usize> = range
+        .filter(|&i| actuators[i].mode == kumi_model::ActuatorMode::Position)
+        .collect();
+    if position.is_empty() {
+        return None;
+    }
+    Some(JointState {
+        header: header(stamp, String::new()),
+        name: position.iter().map(|&i| names[i].to_string()).collect(),
+        position: position.iter().map(|&i| commands[i]).collect(),
+        velocity: Vec::new(),
         effort: Vec::new(),
     })
 }
@@ -79,7 +96,8 @@ pub fn imu(world: &dyn SimWorld, robot: &str, accel_w: &Vector3<f64>, stamp: Tim
     }
 }
 
-/// `/tf` for every link: the base in `<robot>/odom`, then each joint's child in its parent.
+/// `/tf`: the base in `<robot>/odom`, then each moving joint's child in its parent (fixed
+/// joints go once on `/tf_static`: [`static_transforms`]).
 pub fn transforms(
     world: &dyn SimWorld,
     tree: &KinematicTree,
@@ -95,7 +113,7 @@ pub fn transforms(
         child_frame_id: frame(robot, &links[tree.root()]),
         transform: geometry::transform(&world.base_pose()),
     });
-    for j in tree.joints() {
+    for j in tree.joints().iter().filter(|j| j.kind != JointKind::Fixed) {
         let (parent, child) = (&links[j.parent_link], &links[j.child_link]);
         let relative = poses[parent].inverse() * poses[child];
         transforms.push(TransformStamped {
@@ -105,4 +123,22 @@ pub fn transforms(
         });
     }
     TFMessage { transforms }
+}
+
+/// `/tf_static`: each fixed joint's child in its parent, from the URDF (module mounts, tool
+/// frames). Published once, latched.
+pub fn static_transforms(tree: &KinematicTree, robot: &str) -> TFMessage {
+    let links = tree.links();
+    TFMessage {
+        transforms: tree
+            .joints()
+            .iter()
+            .filter(|j| j.kind == JointKind::Fixed)
+            .map(|j| TransformStamped {
+                header: header(Time::default(), frame(robot, &links[j.parent_link])),
+                child_frame_id: frame(robot, &links[j.child_link]),
+                transform: geometry::transform(&j.origin),
+            })
+            .collect(),
+    }
 }
