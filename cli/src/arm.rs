@@ -76,6 +76,7 @@ pub fn run(args: ArmArgs) -> Result<()> {
             ClockArg::Wall => ClockSource::Wall,
         },
         stale_after_s: args.stale_after,
+        duplicate_check: std::time::Duration::from_millis(1500),
         model,
     };
     let shutdown = Arc::new(AtomicBool::new(false));

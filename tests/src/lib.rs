@@ -219,6 +219,7 @@ impl ArmNode {
             domain_id: domain,
             clock: kumi_arm_node::ClockSource::Auto,
             stale_after_s: 0.2,
+            duplicate_check: Duration::from_millis(1500),
         };
         let shutdown = Arc::new(AtomicBool::new(false));
         let flag = shutdown.clone();
@@ -232,6 +233,16 @@ impl ArmNode {
     /// Whether the node is still running.
     pub fn alive(&self) -> bool {
         self.handle.as_ref().is_some_and(|h| !h.is_finished())
+    }
+
+    /// Stops the node and returns how it ended.
+    pub fn stop(mut self) -> Result<(), kumi_arm_node::ArmNodeError> {
+        self.shutdown.store(true, Ordering::Relaxed);
+        self.handle
+            .take()
+            .expect("not yet joined")
+            .join()
+            .expect("arm node thread panicked")
     }
 }
 

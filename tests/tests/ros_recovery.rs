@@ -150,3 +150,36 @@ fn a_node_joining_a_running_simulation_does_not_take_its_joint_states_for_stale(
         "{watched}"
     );
 }
+
+#[test]
+fn a_second_arm_node_for_the_same_module_is_refused() {
+    // Finding 7: a second `kumi arm <module>` for the same module was not refused.
+    let domain = fresh_domain();
+    let _bridge = Bridge::start("arm", domain, Mode::RealTime { factor: 1.0 });
+    let first = ArmNode::start("arm", "arm", "arm", domain, Output::Increments);
+    std::thread::sleep(Duration::from_secs(2));
+    let second = ArmNode::start("arm", "arm", "arm", domain, Output::Increments);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while second.alive() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    match second.stop() {
+        Err(kumi_arm_node::ArmNodeError::Duplicate {
+            robot,
+            module,
+            topic,
+        }) => {
+            assert_eq!((robot.as_str(), module.as_str()), ("arm", "arm"));
+            assert_eq!(topic, "/arm/arm/joint_increments");
+        }
+        other => panic!("the second node was not refused: {other:?}"),
+    }
+    assert!(first.alive(), "refusing the second must not stop the first");
+    // The first still drives the arm.
+    let (error, out) = reach_arm_goal(domain, 4.0, &[]);
+    assert!(error < REACH_BOUND_M, "tool ended {error:.3} m away: {out}");
+    // A node for the same module of another robot name is not a duplicate.
+    let other = ArmNode::start("arm", "arm_b", "arm", domain, Output::Increments);
+    std::thread::sleep(Duration::from_secs(2));
+    assert!(other.alive());
+}

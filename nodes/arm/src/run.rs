@@ -22,7 +22,7 @@ use kumi_policies::skill::{ArmSkill, SkillError};
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode};
 use kumi_runtime::{BackendChoice, RuntimeError, SkillPolicy};
 use nalgebra::Isometry3;
-use ros2_client::{Publisher, Subscription};
+use ros2_client::{Gid, Publisher, Subscription};
 use tracing::{debug, info, warn};
 
 use crate::controller::{ArmController, Hold};
@@ -63,6 +63,8 @@ pub struct ArmNodeConfig {
     pub clock: ClockSource,
     /// Joint states older than this [s] make the node hold.
     pub stale_after_s: f64,
+    /// How long to listen for another node already commanding this module before starting.
+    pub duplicate_check: Duration,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -81,6 +83,12 @@ pub enum ArmNodeError {
     Ros(#[from] RosError),
     #[error("kinematics: {0}")]
     Kinematics(String),
+    #[error("another node already commands module `{module}` of robot `{robot}` (its commands arrive on {topic}); stop it first, or give this robot another name with --robot")]
+    Duplicate {
+        robot: String,
+        module: String,
+        topic: String,
+    },
 }
 
 /// Everything a node needs that is not ROS: checked before any ROS entity is created, so a bad
@@ -158,11 +166,55 @@ struct Io {
     diagnostics: Publisher<DiagnosticArray>,
 }
 
+/// The writers of the messages waiting on `sub` (the messages are dropped).
+fn writers<M: kumi_msgs::RosMessage>(sub: &Subscription<M>) -> Vec<Gid> {
+    let mut out = Vec::new();
+    // Bounded: a flood cannot keep the node here.
+    for _ in 0..1000 {
+        match sub.take() {
+            Ok(Some((_, info))) => out.push(info.publisher_gid()),
+            Ok(None) => break,
+            Err(_) => {}
+        }
+    }
+    out
+}
+
+/// Listens on the node's own output topic: who else sends this module's commands.
+type Listener = Box<dyn FnMut() -> Vec<Gid>>;
+
+fn listen_to_own_output(
+    node: &mut RosNode,
+    output: Output,
+    topic: &str,
+) -> Result<Listener, ArmNodeError> {
+    Ok(match output {
+        Output::Increments => {
+            let sub = node.subscription::<Float64MultiArray>(topic, qos::default())?;
+            Box::new(move || writers(&sub))
+        }
+        Output::JointSet => {
+            let sub = node.subscription::<JointState>(topic, qos::default())?;
+            Box::new(move || writers(&sub))
+        }
+    })
+}
+
 /// Runs the node until `shutdown` is set.
 pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNodeError> {
     let mut prepared = Prepared::new(&config)?;
     let (robot, module) = (config.robot.as_str(), config.module.as_str());
     let mut node = RosNode::new(&format!("/{robot}/{module}"), "arm_node", config.domain_id)?;
+    let output_topic = match config.output {
+        Output::Increments => topics::joint_increments(robot, module),
+        Output::JointSet => topics::joint_set(robot, module),
+    };
+    let duplicate = || ArmNodeError::Duplicate {
+        robot: robot.to_string(),
+        module: module.to_string(),
+        topic: output_topic.clone(),
+    };
+    let mut heard = listen_to_own_output(&mut node, config.output, &output_topic)?;
     let io = Io {
         goal: node.subscription(&topics::goal_pose(robot, module), qos::default())?,
         joint_states: node.subscription(&topics::joint_states(robot, module), qos::default())?,
@@ -182,6 +234,21 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         ee_pose: node.publisher(&topics::ee_pose(robot, module), qos::default())?,
         diagnostics: node.publisher(topics::DIAGNOSTICS, qos::default())?,
     };
+    let own = match (&io.increments, &io.joint_set) {
+        (Some(p), _) => p.gid(),
+        (_, Some(p)) => p.gid(),
+        _ => unreachable!("one output publisher exists"),
+    };
+    // Another node commanding this module now: refuse to be the second. (One that DDS still
+    // lists but that sends nothing, such as a node killed with SIGKILL, is no reason to.)
+    let deadline = Instant::now() + config.duplicate_check;
+    while Instant::now() < deadline {
+        if heard().into_iter().any(|w| w != own) {
+            return Err(duplicate());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut warned_about = std::collections::BTreeSet::new();
     info!(
         "arm node up: /{robot}/{module}, output {:?}, clock {:?}, domain {}",
         config.output,
@@ -200,6 +267,13 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     let mut report_at = Instant::now();
 
     while !shutdown.load(Ordering::Relaxed) {
+        // Someone who started commanding this module later (a second arm node refuses to
+        // start when it hears this one; `ros2 topic pub` does not).
+        for writer in heard() {
+            if writer != own && warned_about.insert(writer) {
+                warn!("{module}: another publisher also sends this module's commands on {output_topic}");
+            }
+        }
         while let Ok(Some((c, _))) = io.clock.take() {
             if config.clock == ClockSource::Wall {
                 continue;
