@@ -70,8 +70,10 @@ fn main() -> ExitCode {
 }
 
 fn run() -> Result<()> {
-    tracing_subscriber::fmt()
-        .with_env_filter(
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    tracing_subscriber::registry()
+        .with(
             tracing_subscriber::EnvFilter::try_from_default_env()
                 // RustDDS reports every discovery event at info: keep it to warnings.
                 .unwrap_or_else(|_| {
@@ -80,13 +82,18 @@ fn run() -> Result<()> {
                     )
                 }),
         )
-        .with_writer(std::io::stderr)
-        // Colour codes only on a terminal: log files and pipes get plain text (and NO_COLOR
-        // turns them off everywhere, as https://no-color.org asks).
-        .with_ansi(
-            std::io::IsTerminal::is_terminal(&std::io::stderr())
-                && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty()),
+        .with(
+            tracing_subscriber::fmt::layer()
+                .with_writer(std::io::stderr)
+                // Colour codes only on a terminal: log files and pipes get plain text (and
+                // NO_COLOR turns them off everywhere, as https://no-color.org asks).
+                .with_ansi(
+                    std::io::IsTerminal::is_terminal(&std::io::stderr())
+                        && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty()),
+                ),
         )
+        // A node's records also go on /rosout.
+        .with(kumi_ros::rosout::RosoutLayer)
         .init();
     let cli = Cli::parse();
     match cli.command {

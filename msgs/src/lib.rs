@@ -6,10 +6,12 @@
 //! into a topic type.
 
 pub mod builtin_interfaces;
+pub mod cdr;
 pub mod diagnostic_msgs;
 mod fixed_array;
 pub mod geometry_msgs;
 pub mod nav_msgs;
+pub mod rcl_interfaces;
 pub mod rosgraph_msgs;
 pub mod sensor_msgs;
 pub mod std_msgs;

@@ -361,6 +361,86 @@ def cmd_watch(args, peer):
             "node": node}
 
 
+def cmd_malformed(args, peer):
+    """Sends hand-broken CDR (issue 10, finding 3) to the arm node and the bridge as raw bytes
+    (rclpy publishes bytes as they are): a goal whose frame_id length is 0, a goal whose
+    frame_id lacks its NUL, a JointState missing its last byte, a Float64MultiArray whose label
+    length is 0. Reports the joint positions before and after and both nodes' diagnostics."""
+    from rclpy.serialization import serialize_message
+    r, a = args.robot, args.arm
+    js_topic = f"/{r}/{a}/joint_states"
+    peer.listen(JointState, js_topic)
+    statuses = {}
+
+    def on_diag(m):
+        for status in m.status:
+            statuses[status.name] = {kv.key: kv.value for kv in status.values}
+
+    peer.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DEFAULT)
+    goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
+    jset = peer.create_publisher(JointState, f"/{r}/{a}/joint_set", DEFAULT)
+    inc = peer.create_publisher(Float64MultiArray, f"/{r}/{a}/joint_increments", DEFAULT)
+    if not peer.spin_until(lambda: js_topic in peer.latest and all(p.get_subscription_count() > 0 for p in (goal, jset, inc)), args.timeout):
+        return {"error": "bridge or arm node not found"}
+    peer.spin_until(lambda: False, 1.0)
+    before = list(peer.latest[js_topic].position)
+
+    good = goal_msg([0.35, 0.1, 1.0, 1.0, 0.0, 0.0, 0.0], f"{r}/{a}/base")
+    raw = bytearray(serialize_message(good))
+    # Encapsulation (4) + stamp (8), then frame_id's length at byte 12.
+    zero_length = bytearray(raw); zero_length[12:16] = (0).to_bytes(4, "little")
+    no_nul = bytearray(raw); n = int.from_bytes(raw[12:16], "little"); no_nul[16 + n - 1] = ord("x")
+    js = JointState(name=["joint1"], position=[0.3])
+    cut = serialize_message(js)[:-1]
+    arr = Float64MultiArray(data=[0.05] + [0.0] * 6)
+    arr.layout.dim = [MultiArrayDimension(label="x", size=7, stride=7)]
+    label = bytearray(serialize_message(arr)); label[8:12] = (0).to_bytes(4, "little")
+    for _ in range(3):
+        goal.publish(bytes(zero_length)); goal.publish(bytes(no_nul))
+        jset.publish(bytes(cut)); inc.publish(bytes(label))
+        peer.spin_until(lambda: False, 0.2)
+    peer.spin_until(lambda: False, 2.0)
+    return {"before": before, "after": list(peer.latest[js_topic].position), "diagnostics": statuses}
+
+
+def cmd_zerobyte(args, peer):
+    """Issue 10, finding 4: one 0-byte sample, then one valid goal; reports how long the arm
+    node took to accept the goal (from its diagnostics), or null."""
+    r, a = args.robot, args.arm
+    accepted = {"n": 0}
+
+    def on_diag(m):
+        for status in m.status:
+            if status.name == f"kumi arm node: {r}/{a}":
+                accepted["n"] = int({kv.key: kv.value for kv in status.values}["goals_accepted"])
+
+    peer.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DEFAULT)
+    goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
+    if not peer.spin_until(lambda: goal.get_subscription_count() > 0, args.timeout):
+        return {"error": "arm node not found"}
+    peer.spin_until(lambda: False, 1.0)
+    goal.publish(b"")
+    goal.publish(goal_msg([0.35, 0.1, 1.0, 1.0, 0.0, 0.0, 0.0], f"{r}/{a}/base"))
+    t = time.monotonic()
+    ok = peer.spin_until(lambda: accepted["n"] > 0, args.drive_seconds)
+    return {"accepted_after_s": time.monotonic() - t if ok else None}
+
+
+def cmd_rosout(args, peer):
+    """Listens on /rosout (as rcl publishes it: transient local, depth 1000) for
+    --drive-seconds, after sending one goal in a frame the arm node does not know (a WARN)."""
+    from rcl_interfaces.msg import Log
+    records = []
+    qos = QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+    peer.create_subscription(Log, "/rosout", lambda m: records.append({"name": m.name, "level": m.level, "msg": m.msg}), qos)
+    goal = peer.create_publisher(PoseStamped, f"/{args.robot}/{args.arm}/goal_pose", DEFAULT)
+    peer.spin_until(lambda: goal.get_subscription_count() > 0, args.timeout)
+    peer.spin_until(lambda: False, 1.0)
+    goal.publish(goal_msg([0.35, 0.1, 1.0, 1.0, 0.0, 0.0, 0.0], "map"))
+    peer.spin_until(lambda: False, args.drive_seconds)
+    return {"records": records}
+
+
 def cmd_armnode(args, peer):
     """Plays the robot for an arm node (wall time, no /clock): publishes joint states at 30 Hz
     and goals, and records what the node commands."""
@@ -546,6 +626,7 @@ def main():
             "observe": cmd_observe, "drive": cmd_drive, "late": cmd_late, "roundtrip": cmd_roundtrip,
             "lockstep": cmd_lockstep, "badinput": cmd_badinput, "latency": cmd_latency,
             "reach": cmd_reach, "armnode": cmd_armnode, "watch": cmd_watch,
+            "malformed": cmd_malformed, "zerobyte": cmd_zerobyte, "rosout": cmd_rosout,
         }[args.command](args, peer)
     finally:
         peer.destroy_node()

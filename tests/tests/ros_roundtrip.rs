@@ -1,5 +1,7 @@
 //! Every message type round-trips between Rust (kumi-msgs over ros2-client) and rclpy with
 //! identical values, both ways. Both sides build their values from `tests/ros/samples.json`.
+//! Rust reads with the strict decoder the nodes use ([`kumi_ros::strict`]): what Fast DDS
+//! writes must decode exactly, alignment padding and all.
 //!
 //! Python -> Rust: rclpy publishes each sample, Rust compares what it decodes.
 //! Rust -> Python -> Rust: Rust publishes each sample, rclpy decodes it (and compares it with
@@ -13,9 +15,9 @@ use kumi_msgs::{
     builtin_interfaces, diagnostic_msgs, geometry_msgs, nav_msgs, rosgraph_msgs, sensor_msgs,
     std_msgs, RosMessage,
 };
-use kumi_ros::{qos, RosNode};
+use kumi_ros::{qos, RosNode, StrictSubscription};
 use kumi_tests::{fresh_domain, peer, workspace};
-use ros2_client::{Publisher, Subscription};
+use ros2_client::Publisher;
 use serde_json::Value;
 
 trait Endpoint {
@@ -29,9 +31,11 @@ trait Endpoint {
 struct Typed<M: RosMessage> {
     key: String,
     expected: M,
-    from_py: Subscription<M>,
+    from_py: StrictSubscription<M>,
     to_py: Publisher<M>,
-    echo: Subscription<M>,
+    echo: StrictSubscription<M>,
+    /// Payloads the strict decoder refused, with the reason.
+    refused: Vec<String>,
     got_from_py: Option<M>,
     got_echo: Option<M>,
 }
@@ -44,16 +48,17 @@ impl<M: RosMessage + PartialEq + Debug> Typed<M> {
             expected: serde_json::from_value(sample.clone())
                 .unwrap_or_else(|e| panic!("{key}: sample does not fit the Rust type: {e}")),
             from_py: node
-                .subscription(&format!("/kumi_rt/py2rs/{topic}"), qos::default())
+                .strict_subscription(&format!("/kumi_rt/py2rs/{topic}"), qos::default())
                 .unwrap(),
             to_py: node
                 .publisher(&format!("/kumi_rt/rs2py/{topic}"), qos::default())
                 .unwrap(),
             echo: node
-                .subscription(&format!("/kumi_rt/py_echo/{topic}"), qos::default())
+                .strict_subscription(&format!("/kumi_rt/py_echo/{topic}"), qos::default())
                 .unwrap(),
             got_from_py: None,
             got_echo: None,
+            refused: Vec::new(),
         }
     }
 }
@@ -64,11 +69,17 @@ impl<M: RosMessage + PartialEq + Debug> Endpoint for Typed<M> {
     }
 
     fn poll(&mut self, publish: bool) {
-        while let Ok(Some((m, _))) = self.from_py.take() {
-            self.got_from_py = Some(m);
+        while let Some(taken) = self.from_py.take() {
+            match taken {
+                Ok((m, _)) => self.got_from_py = Some(m),
+                Err(why) => self.refused.push(why),
+            }
         }
-        while let Ok(Some((m, _))) = self.echo.take() {
-            self.got_echo = Some(m);
+        while let Some(taken) = self.echo.take() {
+            match taken {
+                Ok((m, _)) => self.got_echo = Some(m),
+                Err(why) => self.refused.push(why),
+            }
         }
         if publish {
             let _ = self.to_py.publish(self.expected.clone());
@@ -76,6 +87,12 @@ impl<M: RosMessage + PartialEq + Debug> Endpoint for Typed<M> {
     }
 
     fn status(&self) -> (Option<bool>, Option<bool>) {
+        assert!(
+            self.refused.is_empty(),
+            "{}: the strict decoder refused what rclpy sent: {:?}",
+            self.key,
+            self.refused
+        );
         (
             self.got_from_py.as_ref().map(|m| *m == self.expected),
             self.got_echo.as_ref().map(|m| *m == self.expected),

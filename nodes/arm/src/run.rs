@@ -19,10 +19,10 @@ use kumi_msgs::std_msgs::{Float64MultiArray, Header};
 use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::JOINTS;
 use kumi_policies::skill::{ArmSkill, SkillError};
-use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode};
+use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_runtime::{BackendChoice, RuntimeError, SkillPolicy};
 use nalgebra::Isometry3;
-use ros2_client::{Gid, Publisher, Subscription};
+use ros2_client::{Gid, Publisher};
 use tracing::{debug, info, warn};
 
 use crate::controller::{ArmController, Hold};
@@ -157,9 +157,9 @@ impl Prepared {
 }
 
 struct Io {
-    goal: Subscription<PoseStamped>,
-    joint_states: Subscription<JointState>,
-    clock: Subscription<Clock>,
+    goal: StrictSubscription<PoseStamped>,
+    joint_states: StrictSubscription<JointState>,
+    clock: StrictSubscription<Clock>,
     increments: Option<Publisher<Float64MultiArray>>,
     joint_set: Option<Publisher<JointState>>,
     ee_pose: Publisher<PoseStamped>,
@@ -167,17 +167,14 @@ struct Io {
 }
 
 /// The writers of the messages waiting on `sub` (the messages are dropped).
-fn writers<M: kumi_msgs::RosMessage>(sub: &Subscription<M>) -> Vec<Gid> {
-    let mut out = Vec::new();
-    // Bounded: a flood cannot keep the node here.
-    for _ in 0..1000 {
-        match sub.take() {
-            Ok(Some((_, info))) => out.push(info.publisher_gid()),
-            Ok(None) => break,
-            Err(_) => {}
-        }
-    }
-    out
+/// Messages taken per subscription per loop: a flood cannot keep the node from acting.
+const MAX_TAKEN: usize = 1000;
+
+fn writers<M: kumi_msgs::RosMessage>(sub: &StrictSubscription<M>) -> Vec<Gid> {
+    (0..MAX_TAKEN)
+        .map_while(|_| sub.take())
+        .filter_map(|taken| taken.ok().map(|(_, writer)| writer))
+        .collect()
 }
 
 /// Listens on the node's own output topic: who else sends this module's commands.
@@ -190,11 +187,11 @@ fn listen_to_own_output(
 ) -> Result<Listener, ArmNodeError> {
     Ok(match output {
         Output::Increments => {
-            let sub = node.subscription::<Float64MultiArray>(topic, qos::default())?;
+            let sub = node.strict_subscription::<Float64MultiArray>(topic, qos::default())?;
             Box::new(move || writers(&sub))
         }
         Output::JointSet => {
-            let sub = node.subscription::<JointState>(topic, qos::default())?;
+            let sub = node.strict_subscription::<JointState>(topic, qos::default())?;
             Box::new(move || writers(&sub))
         }
     })
@@ -205,6 +202,10 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     let mut prepared = Prepared::new(&config)?;
     let (robot, module) = (config.robot.as_str(), config.module.as_str());
     let mut node = RosNode::new(&format!("/{robot}/{module}"), "arm_node", config.domain_id)?;
+    let _rosout = kumi_ros::rosout::attach(
+        &mut node,
+        &kumi_ros::rosout::logger_name(&format!("/{robot}/{module}"), "arm_node"),
+    )?;
     let output_topic = match config.output {
         Output::Increments => topics::joint_increments(robot, module),
         Output::JointSet => topics::joint_set(robot, module),
@@ -216,9 +217,10 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     };
     let mut heard = listen_to_own_output(&mut node, config.output, &output_topic)?;
     let io = Io {
-        goal: node.subscription(&topics::goal_pose(robot, module), qos::default())?,
-        joint_states: node.subscription(&topics::joint_states(robot, module), qos::default())?,
-        clock: node.subscription(topics::CLOCK, qos::default())?,
+        goal: node.strict_subscription(&topics::goal_pose(robot, module), qos::default())?,
+        joint_states: node
+            .strict_subscription(&topics::joint_states(robot, module), qos::default())?,
+        clock: node.strict_subscription(topics::CLOCK, qos::default())?,
         increments: match config.output {
             Output::Increments => {
                 Some(node.publisher(&topics::joint_increments(robot, module), qos::default())?)
@@ -274,7 +276,17 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                 warn!("{module}: another publisher also sends this module's commands on {output_topic}");
             }
         }
-        while let Ok(Some((c, _))) = io.clock.take() {
+        for taken in (0..MAX_TAKEN).map_while(|_| io.clock.take()) {
+            let c = match taken {
+                Ok((c, _)) => c,
+                Err(why) => {
+                    report.malformed += 1;
+                    if log.check(Instant::now()).is_some() {
+                        warn!("{module}: refused a malformed /clock message: {why}");
+                    }
+                    continue;
+                }
+            };
             if config.clock == ClockSource::Wall {
                 continue;
             }
@@ -301,9 +313,9 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         }
         let wall_now = start.elapsed().as_secs_f64();
 
-        loop {
+        for _ in 0..MAX_TAKEN {
             match io.goal.take() {
-                Ok(Some((msg, _))) => match prepared.rules.accept(&msg) {
+                Some(Ok((msg, _))) => match prepared.rules.accept(&msg) {
                     Ok(goal) => {
                         report.goals_accepted += 1;
                         let p = goal.position_b;
@@ -330,18 +342,18 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                         }
                     }
                 },
-                Ok(None) => break,
-                Err(e) => {
+                None => break,
+                Some(Err(why)) => {
                     report.malformed += 1;
                     if log.check(Instant::now()).is_some() {
-                        warn!("{module}: malformed goal message dropped: {e:?}");
+                        warn!("{module}: refused a malformed goal: {why}");
                     }
                 }
             }
         }
-        loop {
+        for _ in 0..MAX_TAKEN {
             match io.joint_states.take() {
-                Ok(Some((msg, _))) => {
+                Some(Ok((msg, _))) => {
                     match joints::read(&msg, module, &prepared.controller.skill().joints) {
                         Ok(j) => {
                             let t = if sim {
@@ -366,11 +378,11 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                         }
                     }
                 }
-                Ok(None) => break,
-                Err(e) => {
+                None => break,
+                Some(Err(why)) => {
                     report.malformed += 1;
                     if log.check(Instant::now()).is_some() {
-                        warn!("{module}: malformed joint state dropped: {e:?}");
+                        warn!("{module}: refused a malformed joint state: {why}");
                     }
                 }
             }

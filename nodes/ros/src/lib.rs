@@ -10,9 +10,12 @@
 
 pub mod geometry;
 pub mod qos;
+pub mod rosout;
+pub mod strict;
 pub mod topics;
 mod warn;
 
+pub use strict::StrictSubscription;
 pub use warn::RateLimited;
 
 use kumi_msgs::RosMessage;
@@ -64,6 +67,8 @@ pub fn domain_id_from_env() -> Result<u16, RosError> {
 pub struct RosNode {
     // Fields drop in order: the node (and its writers) before the context it lives in.
     node: ros2_client::Node,
+    /// The RustDDS subscriber of strict subscriptions, made with the first one.
+    subscriber: Option<ros2_client::dds::rustdds::Subscriber>,
     context: Context,
 }
 
@@ -79,7 +84,11 @@ impl RosNode {
         let node = context
             .new_node(node_name, NodeOptions::new().enable_rosout(false))
             .map_err(create_error("node", name))?;
-        Ok(Self { node, context })
+        Ok(Self {
+            node,
+            subscriber: None,
+            context,
+        })
     }
 
     pub fn domain_id(&self) -> u16 {
@@ -135,5 +144,38 @@ impl RosNode {
         self.node
             .create_subscription(&topic, Some(qos))
             .map_err(create_error("subscription", full_name))
+    }
+
+    /// A strictly decoding subscription to `M` on the absolute topic `full_name`
+    /// ([`strict`]): what does not decode exactly is refused whole, with the reason.
+    pub fn strict_subscription<M: RosMessage>(
+        &mut self,
+        full_name: &str,
+        qos: QosProfile,
+    ) -> Result<StrictSubscription<M>, RosError> {
+        use ros2_client::dds::rustdds::QosPolicies;
+        let topic = self.topic::<M>(full_name, &qos)?;
+        let graph = self
+            .node
+            .create_subscription::<strict::Unread>(&topic, Some(qos.clone()))
+            .map_err(create_error("subscription", full_name))?;
+        if self.subscriber.is_none() {
+            let subscriber = self
+                .context
+                .domain_participant()
+                .create_subscriber(&QosPolicies::from(qos.clone()))
+                .map_err(create_error("subscriber", full_name))?;
+            self.subscriber = Some(subscriber);
+        }
+        let reader = self
+            .subscriber
+            .as_ref()
+            .expect("created above")
+            .create_simple_datareader_no_key::<strict::RawSample, strict::RawAdapter>(
+                &topic,
+                Some(QosPolicies::from(qos)),
+            )
+            .map_err(create_error("subscription", full_name))?;
+        Ok(StrictSubscription::new(reader, graph))
     }
 }

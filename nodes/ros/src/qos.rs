@@ -21,3 +21,12 @@ pub fn latched() -> QosProfile {
         .durability(Durability::TransientLocal)
         .history(History::KeepLast { depth: 1 })
 }
+
+/// `/rosout`, as rcl publishes it: reliable, transient local, keep last 1000, so that a
+/// `ros2 topic echo /rosout` started late still sees the recent records.
+pub fn rosout() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability_reliable(WhenFull::DEFAULT)
+        .durability(Durability::TransientLocal)
+        .history(History::KeepLast { depth: 1000 })
+}

@@ -53,6 +53,8 @@ pub fn robot_description(robot: &str) -> String {
 pub const TF: &str = "/tf";
 /// `/clock`: `rosgraph_msgs/Clock`, simulated time.
 pub const CLOCK: &str = "/clock";
+/// `/rosout`: `rcl_interfaces/Log`, every node's log records.
+pub const ROSOUT: &str = "/rosout";
 /// `/diagnostics`: `diagnostic_msgs/DiagnosticArray`.
 pub const DIAGNOSTICS: &str = "/diagnostics";
 

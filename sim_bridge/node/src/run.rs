@@ -12,10 +12,10 @@ use kumi_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
 use kumi_msgs::rosgraph_msgs::Clock;
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_msgs::std_msgs::{Float64, Float64MultiArray, Header, StringMsg};
-use kumi_ros::{qos, topics, RateLimited, RosError, RosNode};
+use kumi_ros::{qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_worlds::{Engine, SimConfig, SimError, SimWorld};
 use nalgebra::Vector3;
-use ros2_client::{Publisher, Subscription};
+use ros2_client::Publisher;
 use tracing::{info, warn};
 
 use crate::commands::{Commands, Rejection, Update};
@@ -72,9 +72,9 @@ pub enum BridgeError {
 /// Subscriptions of one module.
 struct ModuleInputs {
     name: String,
-    increments: Option<Subscription<Float64MultiArray>>,
-    joint_set: Option<Subscription<JointState>>,
-    wheel_velocity: Option<Subscription<Float64>>,
+    increments: Option<StrictSubscription<Float64MultiArray>>,
+    joint_set: Option<StrictSubscription<JointState>>,
+    wheel_velocity: Option<StrictSubscription<Float64>>,
 }
 
 /// An incoming message, taken off its subscription.
@@ -182,17 +182,25 @@ fn open_io(
         inputs.push(ModuleInputs {
             name: m.name.clone(),
             increments: if has_position {
-                Some(node.subscription(&topics::joint_increments(robot, &m.name), qos::default())?)
+                Some(node.strict_subscription(
+                    &topics::joint_increments(robot, &m.name),
+                    qos::default(),
+                )?)
             } else {
                 None
             },
             joint_set: if has_position {
-                Some(node.subscription(&topics::joint_set(robot, &m.name), qos::default())?)
+                Some(node.strict_subscription(&topics::joint_set(robot, &m.name), qos::default())?)
             } else {
                 None
             },
             wheel_velocity: if has_wheels {
-                Some(node.subscription(&topics::wheel_velocity(robot, &m.name), qos::default())?)
+                Some(
+                    node.strict_subscription(
+                        &topics::wheel_velocity(robot, &m.name),
+                        qos::default(),
+                    )?,
+                )
             } else {
                 None
             },
@@ -224,37 +232,66 @@ fn open_io(
     })
 }
 
-/// Takes every waiting message of one module, oldest first.
-fn drain(inputs: &ModuleInputs, malformed: &mut u64) -> Vec<Incoming> {
-    let mut out = Vec::new();
-    let mut take = |f: &mut dyn FnMut() -> Option<Result<Incoming, ()>>| {
-        while let Some(r) = f() {
-            match r {
-                Ok(m) => out.push(m),
-                Err(()) => *malformed += 1,
+/// Messages taken per subscription per loop: a flood cannot keep the bridge from stepping.
+const MAX_TAKEN: usize = 1000;
+
+/// Takes the waiting messages of one subscription, oldest first; what does not decode exactly
+/// is counted in `malformed` and logged (rate-limited) with the reason.
+fn take_all<M: kumi_msgs::RosMessage>(
+    sub: &StrictSubscription<M>,
+    topic: &str,
+    malformed: &mut u64,
+    log: &mut RateLimited,
+    out: &mut Vec<Incoming>,
+    wrap: fn(M) -> Incoming,
+) {
+    for _ in 0..MAX_TAKEN {
+        match sub.take() {
+            None => break,
+            Some(Ok((m, _))) => out.push(wrap(m)),
+            Some(Err(why)) => {
+                *malformed += 1;
+                if let Some(n) = log.check(Instant::now()) {
+                    warn!("{topic}: refused a malformed message: {why} ({n} more suppressed)");
+                }
             }
         }
-    };
+    }
+}
+
+/// Takes every waiting message of one module, oldest first.
+fn drain(inputs: &ModuleInputs, malformed: &mut u64, log: &mut RateLimited) -> Vec<Incoming> {
+    let mut out = Vec::new();
+    let m = &inputs.name;
     if let Some(sub) = &inputs.increments {
-        take(&mut || match sub.take() {
-            Ok(Some((m, _))) => Some(Ok(Incoming::Increments(m))),
-            Ok(None) => None,
-            Err(_) => Some(Err(())),
-        });
+        take_all(
+            sub,
+            &format!("{m}/joint_increments"),
+            malformed,
+            log,
+            &mut out,
+            Incoming::Increments,
+        );
     }
     if let Some(sub) = &inputs.joint_set {
-        take(&mut || match sub.take() {
-            Ok(Some((m, _))) => Some(Ok(Incoming::JointSet(m))),
-            Ok(None) => None,
-            Err(_) => Some(Err(())),
-        });
+        take_all(
+            sub,
+            &format!("{m}/joint_set"),
+            malformed,
+            log,
+            &mut out,
+            Incoming::JointSet,
+        );
     }
     if let Some(sub) = &inputs.wheel_velocity {
-        take(&mut || match sub.take() {
-            Ok(Some((m, _))) => Some(Ok(Incoming::WheelVelocity(m.data))),
-            Ok(None) => None,
-            Err(_) => Some(Err(())),
-        });
+        take_all(
+            sub,
+            &format!("{m}/wheel_velocity"),
+            malformed,
+            log,
+            &mut out,
+            |x| Incoming::WheelVelocity(x.data),
+        );
     }
     out
 }
@@ -317,6 +354,10 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         config.domain_id,
     )?;
 
+    let rosout = kumi_ros::rosout::attach(
+        &mut node,
+        &kumi_ros::rosout::logger_name(&format!("/{}", config.robot), "sim_bridge"),
+    )?;
     refuse_duplicates(&node, &config)?;
     let io = open_io(&mut node, &config, &tree)?;
     info!(
@@ -339,6 +380,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     let mut counters = Counters::default();
     let mut malformed = 0_u64;
     let mut reject_log = RateLimited::new(Duration::from_secs(1));
+    let mut malformed_log = RateLimited::new(Duration::from_secs(1));
     let mut steps: u64 = 0;
     let mut last_linvel = world.base_twist_w().0;
     let mut accel_w = Vector3::zeros();
@@ -372,7 +414,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         let now_s = steps as f64 * control_dt;
         // Commands.
         for inputs in &io.inputs {
-            for message in drain(inputs, &mut malformed) {
+            for message in drain(inputs, &mut malformed, &mut malformed_log) {
                 let result = match message {
                     Incoming::Increments(m) => commands.increments(&inputs.name, &m.data, now_s),
                     Incoming::JointSet(m) => {
@@ -472,6 +514,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     }
     info!("sim bridge stopping after {steps} control steps");
     drop(io);
+    drop(rosout);
     drop(node);
     Ok(())
 }
