@@ -48,7 +48,7 @@ fn the_node_sees_what_training_saw() {
         let msg = PoseStamped {
             header: Header {
                 stamp,
-                frame_id: "arm/base".into(),
+                frame_id: "arm/arm/base".into(),
             },
             pose: kumi_ros::geometry::pose(&Isometry3::from_parts(
                 goal.position_b.into(),

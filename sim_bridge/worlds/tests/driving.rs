@@ -16,10 +16,9 @@ fn drives_forward_at_omega_r(engine: Engine, name: &str) {
     let base_x = w.base_pose().rotation * Vector3::x();
     let model = w.model().clone();
     for m in model.modules_with_role(Role::Wheel) {
-        // Each module's own forward axis decides the sign that drives the base along +x.
-        let forward = w.link_pose(&m.root_link).unwrap().rotation * Vector3::x();
-        w.set_wheel_velocity(&m.name, omega * forward.dot(&base_x).signum())
-            .unwrap();
+        // Positive drives the base along +x however the module is mounted (the world applies
+        // `RobotModel::wheel_drive_sign`; Tricycle's wheel modules face backwards).
+        w.set_wheel_velocity(&m.name, omega).unwrap();
     }
     // 2 s to get up to speed, then measure over 5 s.
     for _ in 0..60 {
