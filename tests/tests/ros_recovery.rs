@@ -15,6 +15,26 @@ const LOCKSTEP: Mode = Mode::Lockstep {
     timeout: Duration::from_millis(100),
 };
 
+/// What the rclpy peer saw of robot `arm` over `seconds` of wall time (its `watch` report).
+fn watch(domain: u16, seconds: f64) -> serde_json::Value {
+    let seconds = seconds.to_string();
+    peer(
+        domain,
+        &[
+            "watch",
+            "--robot",
+            "arm",
+            "--arm",
+            "arm",
+            "--drive-seconds",
+            &seconds,
+            "--timeout",
+            "20",
+        ],
+        Duration::from_secs(40),
+    )
+}
+
 fn f(v: &serde_json::Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
 }
@@ -76,21 +96,7 @@ fn a_dead_arm_node_in_lockstep_is_reported_and_the_robot_holds() {
     let (_, out) = reach_arm_goal(domain, 0.5, &[]);
     assert!(out.get("error").is_none(), "{out}");
     drop(node);
-    let watched = peer(
-        domain,
-        &[
-            "watch",
-            "--robot",
-            "arm",
-            "--arm",
-            "arm",
-            "--drive-seconds",
-            "6",
-            "--timeout",
-            "20",
-        ],
-        Duration::from_secs(40),
-    );
+    let watched = watch(domain, 6.0);
     assert!(bridge.alive());
     // Sim time goes on at one step per timeout (0.1 s): 6 s of wall time is ~2 s of sim time.
     let advanced = f(&watched["clock_end"]) - f(&watched["clock_start"]);
@@ -120,21 +126,7 @@ fn a_node_joining_a_running_simulation_does_not_take_its_joint_states_for_stale(
     let _bridge = Bridge::start("arm", domain, Mode::RealTime { factor: 1.0 });
     std::thread::sleep(Duration::from_secs(3));
     let _node = ArmNode::start("arm", "arm", "arm", domain, Output::Increments);
-    let watched = peer(
-        domain,
-        &[
-            "watch",
-            "--robot",
-            "arm",
-            "--arm",
-            "arm",
-            "--drive-seconds",
-            "4",
-            "--timeout",
-            "20",
-        ],
-        Duration::from_secs(40),
-    );
+    let watched = watch(domain, 4.0);
     let node = &watched["node"];
     assert!(
         !node["messages"].as_array().unwrap().is_empty(),
