@@ -319,13 +319,92 @@ def cmd_reach(args, peer):
         inc.publish(Float64MultiArray(data=[1e308] * 7))
         t0 = sim()
         peer.spin_until(lambda: sim() >= t0 + 2.0, args.timeout)
-    start = sim()
-    goal.publish(goal_msg([float(v) for v in args.goal.split(",")], args.frame))
-    peer.spin_until(lambda: sim() >= start + args.drive_seconds, args.timeout)
+    start, wall = sim(), time.monotonic()
+    target = [float(v) for v in args.goal.split(",")]
+    goal.publish(goal_msg(target, args.frame))
+
+    def done():
+        if sim() >= start + args.drive_seconds:
+            return True
+        p = peer.latest[ee_topic].pose.position
+        return args.within > 0 and math.dist([p.x, p.y, p.z], target[:3]) < args.within
+
+    peer.spin_until(done, args.timeout)
     ee = peer.latest[ee_topic]
     p, o = ee.pose.position, ee.pose.orientation
-    return {"start": start, "end": sim(), "position": [p.x, p.y, p.z], "orientation": [o.w, o.x, o.y, o.z],
-            "frame": ee.header.frame_id}
+    return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall, "position": [p.x, p.y, p.z],
+            "orientation": [o.w, o.x, o.y, o.z], "frame": ee.header.frame_id}
+
+
+def cmd_flood(args, peer):
+    """Issue 10's flood: --count goals as fast as rclpy sends them (random, within 5 cm of
+    --goal), then 1 MB payloads on every topic the arm node and the bridge subscribe to (junk
+    bytes, and well-formed messages of 1 MB; /clock's is short), then --goal itself: reports the tool pose after
+    --drive-seconds of sim time and both nodes' diagnostics."""
+    import random
+    r, a = args.robot, args.arm
+    ee_topic = f"/{r}/{a}/ee_pose"
+    peer.listen(PoseStamped, ee_topic)  # not /clock: this peer sends junk there
+    statuses = {}
+
+    def on_diag(m):
+        for status in m.status:
+            statuses[status.name] = {kv.key: kv.value for kv in status.values}
+
+    peer.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DEFAULT)
+    goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
+    states = peer.create_publisher(JointState, f"/{r}/{a}/joint_states", DEFAULT)
+    clock = peer.create_publisher(Clock, "/clock", DEFAULT)
+    jset = peer.create_publisher(JointState, f"/{r}/{a}/joint_set", DEFAULT)
+    inc = peer.create_publisher(Float64MultiArray, f"/{r}/{a}/joint_increments", DEFAULT)
+    pubs = (goal, states, clock, jset, inc)
+    if not peer.spin_until(lambda: ee_topic in peer.latest and all(p.get_subscription_count() > 0 for p in pubs), args.timeout):
+        return {"error": "arm node or bridge not found"}
+    target = [float(v) for v in args.goal.split(",")]
+    rng = random.Random(int(args.seed))
+    t = time.monotonic()
+    for _ in range(args.count):
+        jitter = [v + rng.uniform(-0.05, 0.05) for v in target[:3]]
+        goal.publish(goal_msg(jitter + target[3:], args.frame))
+    goals_s = time.monotonic() - t
+    junk = bytes([0, 1, 0, 0]) + bytes([0x41]) * (1 << 20)
+    big_names = ["joint%d" % (k % 7 + 1) for k in range(1 << 14)]
+    big = [
+        (goal, goal_msg(target, "x" * (1 << 20))),
+        (states, JointState(name=big_names, position=[0.0] * len(big_names), velocity=[0.0] * len(big_names))),
+        (jset, JointState(name=big_names, position=[0.0] * len(big_names))),
+        (inc, Float64MultiArray(data=[0.0] * (1 << 17))),
+    ]
+    # Fast DDS itself refuses a write now and then while its reliable history still holds
+    # unacknowledged samples of the burst ("cannot publish data"): such a write is retried.
+    retries = 0
+
+    def send(p, m):
+        nonlocal retries
+        for _ in range(20):
+            try:
+                p.publish(m)
+                return
+            except Exception:  # rclpy's RCLError
+                retries += 1
+                peer.spin_until(lambda: False, 0.25)
+        raise RuntimeError(f"Fast DDS refused a payload of {len(m) if isinstance(m, bytes) else type(m).__name__} on {p.topic_name} 20 times")
+
+    peer.spin_until(lambda: False, 0.5)
+    t = time.monotonic()
+    # Fast DDS will not send more than a bounded type's size (rosgraph_msgs/Clock: 8 bytes), so
+    # /clock gets a payload cut short instead (4 bytes: any 8 would be a valid Clock).
+    for p in pubs:
+        send(p, bytes([0, 1, 0, 0]) + bytes([0x41]) * 4 if p is clock else junk)
+    for p, m in big:
+        send(p, m)
+    peer.spin_until(lambda: False, 1.0)
+    payload_s = time.monotonic() - t
+    goal.publish(goal_msg(target, args.frame))
+    peer.spin_until(lambda: False, args.drive_seconds)
+    p = peer.latest[ee_topic].pose.position
+    peer.spin_until(lambda: False, 1.5)
+    return {"goals_s": goals_s, "payload_s": payload_s, "sender_retries": retries, "position": [p.x, p.y, p.z], "diagnostics": statuses}
 
 
 def cmd_watch(args, peer):
@@ -616,6 +695,7 @@ def main():
     p.add_argument("--linger", type=float, default=2.0)
     p.add_argument("--goal", default="")
     p.add_argument("--frame", default="")
+    p.add_argument("--within", type=float, default=0.0)
     args = p.parse_args()
     if args.command == "latency":
         args.samples = int(args.samples or 50)
@@ -627,6 +707,7 @@ def main():
             "lockstep": cmd_lockstep, "badinput": cmd_badinput, "latency": cmd_latency,
             "reach": cmd_reach, "armnode": cmd_armnode, "watch": cmd_watch,
             "malformed": cmd_malformed, "zerobyte": cmd_zerobyte, "rosout": cmd_rosout,
+            "flood": cmd_flood,
         }[args.command](args, peer)
     finally:
         peer.destroy_node()

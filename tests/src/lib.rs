@@ -118,8 +118,28 @@ impl Drop for Bridge {
 /// Runs `tests/ros/peer.py <args>` on `domain` and returns its JSON result; kills it after
 /// `deadline`.
 pub fn peer(domain: u16, args: &[&str], deadline: Duration) -> serde_json::Value {
-    let mut child = Command::new(python())
-        .arg(workspace().join("tests/ros/peer.py"))
+    peer_in(&[], domain, args, deadline)
+}
+
+/// [`peer`] run under a command prefix (`ip netns exec NS`), or none.
+pub fn peer_in(
+    prefix: &[&str],
+    domain: u16,
+    args: &[&str],
+    deadline: Duration,
+) -> serde_json::Value {
+    let python = python();
+    let script = workspace().join("tests/ros/peer.py");
+    let mut command = match prefix.split_first() {
+        Some((program, rest)) => {
+            let mut c = Command::new(program);
+            c.args(rest).arg(&python);
+            c
+        }
+        None => Command::new(&python),
+    };
+    let mut child = command
+        .arg(script)
         .args(args)
         .env("ROS_DOMAIN_ID", domain.to_string())
         .env("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
@@ -270,6 +290,16 @@ pub const REACH_BOUND_M: f64 = 0.15;
 /// waits `drive_s` of sim time; returns the tool's final distance to the goal [m] and the
 /// peer's report. `extra` adds peer options (`--disturb`).
 pub fn reach_arm_goal(domain: u16, drive_s: f64, extra: &[&str]) -> (f64, serde_json::Value) {
+    reach_arm_goal_in(&[], domain, drive_s, extra)
+}
+
+/// [`reach_arm_goal`] with the peer run under a command prefix (see [`peer_in`]).
+pub fn reach_arm_goal_in(
+    prefix: &[&str],
+    domain: u16,
+    drive_s: f64,
+    extra: &[&str],
+) -> (f64, serde_json::Value) {
     let goal: Vec<String> = ARM_GOAL.iter().map(|v| v.to_string()).collect();
     let goal = goal.join(",");
     let drive = drive_s.to_string();
@@ -287,7 +317,7 @@ pub fn reach_arm_goal(domain: u16, drive_s: f64, extra: &[&str]) -> (f64, serde_
         "60",
     ];
     args.extend_from_slice(extra);
-    let out = peer(domain, &args, Duration::from_secs(90));
+    let out = peer_in(prefix, domain, &args, Duration::from_secs(90));
     assert!(out.get("error").is_none(), "{out}");
     let p: Vec<f64> = out["position"]
         .as_array()
@@ -300,4 +330,131 @@ pub fn reach_arm_goal(domain: u16, drive_s: f64, extra: &[&str]) -> (f64, serde_
         + (p[2] - ARM_GOAL[2]).powi(2))
     .sqrt();
     (error, out)
+}
+
+/// What the rclpy peer saw of robot `arm` (module `arm`) over `seconds` of wall time: its
+/// `watch` report (sim time, the bridge's stale holds, lockstep timeouts and silent modules, the
+/// arm node's diagnostics, the arm's joint speeds at the end).
+pub fn watch_arm(domain: u16, seconds: f64) -> serde_json::Value {
+    let seconds = seconds.to_string();
+    peer(
+        domain,
+        &[
+            "watch",
+            "--robot",
+            "arm",
+            "--arm",
+            "arm",
+            "--drive-seconds",
+            &seconds,
+            "--timeout",
+            "20",
+        ],
+        Duration::from_secs(40),
+    )
+}
+
+/// The resident memory of process `pid` [KiB] (`VmRSS` in /proc), or 0 when it has gone.
+pub fn rss_kib(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .unwrap_or(0)
+}
+
+/// A kumi node run as a process of its own (the `kumi` binary of the calling crate), so that a
+/// test can kill it with SIGKILL: no DDS goodbye, no clean shutdown. Its stdout and stderr go to
+/// a log file; it is killed when dropped.
+pub struct KumiProcess {
+    child: std::process::Child,
+    label: String,
+    log: PathBuf,
+}
+
+impl KumiProcess {
+    /// Starts `exe args` on `domain` (under `prefix`, for example `ip netns exec NS`), with the
+    /// ONNX Runtime library of [`onnxruntime_library`].
+    pub fn spawn(exe: &str, prefix: &[&str], args: &[&str], domain: u16) -> Self {
+        static SERIAL: AtomicU16 = AtomicU16::new(0);
+        let label = args.join(" ");
+        let log = std::env::temp_dir().join(format!(
+            "kumi-test-{}-{}.log",
+            std::process::id(),
+            SERIAL.fetch_add(1, Ordering::Relaxed)
+        ));
+        let file = std::fs::File::create(&log).expect("create the log file");
+        let mut command = match prefix.split_first() {
+            Some((program, rest)) => {
+                let mut c = Command::new(program);
+                c.args(rest).arg(exe);
+                c
+            }
+            None => Command::new(exe),
+        };
+        let child = command
+            .args(args)
+            .env("ROS_DOMAIN_ID", domain.to_string())
+            .env("ORT_DYLIB_PATH", onnxruntime_library())
+            .env_remove("RUST_LOG")
+            .stdout(file.try_clone().expect("log file"))
+            .stderr(file)
+            .spawn()
+            .unwrap_or_else(|e| panic!("start `{label}`: {e}"));
+        Self { child, label, log }
+    }
+
+    /// The process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Whether it still runs.
+    pub fn alive(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+
+    /// Kills it with SIGKILL and reaps it.
+    pub fn kill9(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// Its resident memory [KiB], or 0 when it has gone.
+    pub fn rss_kib(&self) -> u64 {
+        rss_kib(self.pid())
+    }
+
+    /// Everything it printed so far.
+    pub fn log(&self) -> String {
+        format!(
+            "== {}\n{}",
+            self.label,
+            std::fs::read_to_string(&self.log).unwrap_or_default()
+        )
+    }
+
+    /// Waits up to `timeout` for a line of its log that contains `text`.
+    pub fn wait_for_log(&self, text: &str, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline {
+            if std::fs::read_to_string(&self.log)
+                .unwrap_or_default()
+                .contains(text)
+            {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        false
+    }
+}
+
+impl Drop for KumiProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_file(&self.log);
+    }
 }

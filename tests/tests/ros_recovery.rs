@@ -2,38 +2,20 @@
 //! the servo targets belong to the bridge alone (finding 1), a restarted bridge is followed
 //! (finding 2), a dead arm node in lockstep is noticed and the robot holds (finding 6).
 //!
-//! The nodes run in threads of this process and stop cleanly; killing them with SIGKILL (no
-//! DDS goodbye) is not covered here.
+//! The nodes run in threads of this process and stop cleanly; `cli/tests/ros_processes.rs`
+//! kills them with SIGKILL (no DDS goodbye).
 
 use std::time::{Duration, Instant};
 
 use kumi_arm_node::Output;
 use kumi_sim_bridge::Mode;
-use kumi_tests::{fresh_domain, peer, reach_arm_goal, ArmNode, Bridge, REACH_BOUND_M};
+use kumi_tests::{
+    fresh_domain, reach_arm_goal, watch_arm as watch, ArmNode, Bridge, REACH_BOUND_M,
+};
 
 const LOCKSTEP: Mode = Mode::Lockstep {
     timeout: Duration::from_millis(100),
 };
-
-/// What the rclpy peer saw of robot `arm` over `seconds` of wall time (its `watch` report).
-fn watch(domain: u16, seconds: f64) -> serde_json::Value {
-    let seconds = seconds.to_string();
-    peer(
-        domain,
-        &[
-            "watch",
-            "--robot",
-            "arm",
-            "--arm",
-            "arm",
-            "--drive-seconds",
-            &seconds,
-            "--timeout",
-            "20",
-        ],
-        Duration::from_secs(40),
-    )
-}
 
 fn f(v: &serde_json::Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))

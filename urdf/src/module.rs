@@ -167,6 +167,93 @@ pub struct Module {
     pub options: Vec<ModuleOption>,
 }
 
+/// The first number of `robot` that is NaN or infinite, named (`joint `j1` origin`).
+fn first_non_finite_urdf(robot: &urdf_rs::Robot) -> Option<String> {
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    let pose = |p: &urdf_rs::Pose| finite(&p.xyz.0) && finite(&p.rpy.0);
+    let geometry = |g: &urdf_rs::Geometry| match g {
+        urdf_rs::Geometry::Box { size } => finite(&size.0),
+        urdf_rs::Geometry::Cylinder { radius, length }
+        | urdf_rs::Geometry::Capsule { radius, length } => finite(&[*radius, *length]),
+        urdf_rs::Geometry::Sphere { radius } => radius.is_finite(),
+        urdf_rs::Geometry::Mesh { scale, .. } => scale.as_ref().is_none_or(|s| finite(&s.0)),
+    };
+    for link in &robot.links {
+        let inertial = &link.inertial;
+        let i = &inertial.inertia;
+        let checks = [
+            ("inertial origin", pose(&inertial.origin)),
+            ("mass", inertial.mass.value.is_finite()),
+            (
+                "inertia",
+                finite(&[i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz]),
+            ),
+            (
+                "visual",
+                link.visual
+                    .iter()
+                    .all(|v| pose(&v.origin) && geometry(&v.geometry)),
+            ),
+            (
+                "collision",
+                link.collision
+                    .iter()
+                    .all(|c| pose(&c.origin) && geometry(&c.geometry)),
+            ),
+        ];
+        if let Some((what, _)) = checks.iter().find(|(_, ok)| !ok) {
+            return Some(format!("link `{}` {what}", link.name));
+        }
+    }
+    for joint in &robot.joints {
+        let l = &joint.limit;
+        let d = joint.dynamics.clone().unwrap_or_default();
+        let checks = [
+            ("origin", pose(&joint.origin)),
+            ("axis", finite(&joint.axis.xyz.0)),
+            ("limit", finite(&[l.lower, l.upper, l.effort, l.velocity])),
+            ("dynamics", finite(&[d.damping, d.friction])),
+        ];
+        if let Some((what, _)) = checks.iter().find(|(_, ok)| !ok) {
+            return Some(format!("joint `{}` {what}", joint.name));
+        }
+    }
+    None
+}
+
+/// The first number of a module TOML that is NaN or infinite: (field, what).
+fn first_non_finite_toml(raw: &ModuleToml) -> Option<(String, &'static str)> {
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    for (i, a) in raw.actuator.iter().enumerate() {
+        if !finite(&[a.stiffness, a.damping, a.armature]) {
+            return Some((format!("actuator[{i}]"), "every gain"));
+        }
+    }
+    for (i, c) in raw.connector.iter().enumerate() {
+        if !finite(&c.xyz) || !finite(&c.rpy) {
+            return Some((format!("connector[{i}]"), "the pose"));
+        }
+    }
+    for (i, c) in raw.contact.iter().enumerate() {
+        if !c.friction.is_finite() {
+            return Some((format!("contact[{i}].friction"), "friction"));
+        }
+    }
+    for (i, option) in raw.option.iter().enumerate() {
+        for (k, c) in option.contact.iter().enumerate() {
+            if !c.friction.is_finite() {
+                return Some((format!("option[{i}].contact[{k}].friction"), "friction"));
+            }
+        }
+        for (k, c) in option.collision.iter().enumerate() {
+            if !finite(&c.xyz) {
+                return Some((format!("option[{i}].collision[{k}].xyz"), "the position"));
+            }
+        }
+    }
+    None
+}
+
 impl Module {
     /// Parses a module from its TOML text and its URDF text. `file` names the TOML file in errors.
     pub fn parse(file: &str, toml_text: &str, urdf_text: &str) -> Result<Self, ModelError> {
@@ -174,6 +261,18 @@ impl Module {
         let urdf = urdf_rs::read_from_string(urdf_text)
             .map_err(|e| ModelError::new(file, "urdf", Problem::BadUrdf(e.to_string())))?;
         let err = |field: String, problem| ModelError::new(file, field, problem);
+        if let Some(what) = first_non_finite_urdf(&urdf) {
+            return Err(err(
+                "urdf".into(),
+                Problem::BadUrdf(format!("{what} is not a finite number")),
+            ));
+        }
+        if let Some((field, what)) = first_non_finite_toml(&raw) {
+            return Err(err(
+                field,
+                Problem::BadValue(format!("{what} must be finite")),
+            ));
+        }
         let has_link = |name: &str| urdf.links.iter().any(|l| l.name == name);
 
         if !has_link(&raw.root_link) {
@@ -269,10 +368,10 @@ impl Module {
                         Problem::BadUrdf(format!("no link `{}` in {}", extra.link, raw.urdf)),
                     ));
                 }
-                if extra.sphere.is_nan() || extra.sphere <= 0.0 {
+                if !extra.sphere.is_finite() || extra.sphere <= 0.0 {
                     return Err(err(
                         format!("option[{i}].collision[{k}].sphere"),
-                        Problem::BadValue("sphere radius must be positive [m]".into()),
+                        Problem::BadValue("sphere radius must be positive and finite [m]".into()),
                     ));
                 }
             }

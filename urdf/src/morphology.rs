@@ -262,11 +262,15 @@ impl Morphology {
                             )),
                         ));
                     }
-                    if !raw_mount.spin.is_finite() {
+                    // Beyond a turn or two, sin and cos of huge angles make NaN poses.
+                    if raw_mount.spin.is_nan() || raw_mount.spin.abs() > 4.0 * std::f64::consts::PI
+                    {
                         return Err(ModelError::new(
                             file,
                             at("mount.spin"),
-                            Problem::BadValue("spin must be a finite angle [rad]".into()),
+                            Problem::BadValue(
+                                "spin must be a finite angle within +-4 pi [rad]".into(),
+                            ),
                         ));
                     }
                     Some(Mount {

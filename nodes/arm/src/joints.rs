@@ -15,6 +15,8 @@ pub enum JointStateRejection {
     },
     #[error("joint state lacks joint `{0}`")]
     MissingJoint(String),
+    #[error("joint state names joint `{0}` twice")]
+    DuplicateJoint(String),
     #[error("joint state has a non-finite value for `{0}`")]
     NonFinite(String),
 }
@@ -42,6 +44,12 @@ pub fn read(
         });
     }
     let prefix = format!("{module}/");
+    let mut seen = std::collections::HashSet::with_capacity(msg.name.len());
+    for name in &msg.name {
+        if !seen.insert(name.strip_prefix(prefix.as_str()).unwrap_or(name)) {
+            return Err(JointStateRejection::DuplicateJoint(name.clone()));
+        }
+    }
     let mut out = Joints {
         q: [0.0; JOINTS],
         qd: [0.0; JOINTS],
@@ -114,6 +122,12 @@ mod tests {
         assert_eq!(
             read(&msg(names(), q, vec![0.0; 7]), "arm", &names()),
             Err(JointStateRejection::NonFinite("joint3".into()))
+        );
+        let mut twice = names();
+        twice.push("arm/joint4".into());
+        assert_eq!(
+            read(&msg(twice, vec![0.0; 8], vec![0.0; 8]), "arm", &names()),
+            Err(JointStateRejection::DuplicateJoint("arm/joint4".into()))
         );
     }
 }

@@ -21,6 +21,12 @@ pub enum Rejection {
         module: String,
         joint: String,
     },
+    /// A joint named twice in one message (which value would win is not the sender's to leave
+    /// to the receiver).
+    DuplicateJoint {
+        module: String,
+        joint: String,
+    },
     /// A command for a module that has no joints of that kind (increments to a wheel module).
     WrongModule {
         module: String,
@@ -42,6 +48,7 @@ impl Rejection {
             Rejection::NonFinite { .. } => "non_finite",
             Rejection::WrongLength { .. } => "wrong_length",
             Rejection::UnknownJoint { .. } => "unknown_joint",
+            Rejection::DuplicateJoint { .. } => "duplicate_joint",
             Rejection::WrongModule { .. } => "wrong_module",
             Rejection::TooLarge { .. } => "too_large",
         }
@@ -68,6 +75,10 @@ impl std::fmt::Display for Rejection {
             Rejection::UnknownJoint { module, joint } => write!(
                 f,
                 "{module}: rejected a command for unknown joint `{joint}`"
+            ),
+            Rejection::DuplicateJoint { module, joint } => write!(
+                f,
+                "{module}: rejected a command that names joint `{joint}` twice"
             ),
             Rejection::WrongModule { module, what } => write!(
                 f,
@@ -292,6 +303,12 @@ impl Commands {
                     module: module.to_string(),
                     joint: name.clone(),
                 })?;
+            if indices.contains(&i) {
+                return Err(Rejection::DuplicateJoint {
+                    module: module.to_string(),
+                    joint: name.clone(),
+                });
+            }
             indices.push(i);
         }
         for (i, q) in indices.into_iter().zip(positions) {
@@ -483,6 +500,19 @@ mod tests {
             Update::PositionTargets {
                 module: "leg0".into(),
                 targets: vec![0.0, 0.3, 0.0, 0.0, 0.0, 0.0, -0.2]
+            }
+        );
+        assert_eq!(
+            c.joint_set(
+                "leg0",
+                &["joint2".into(), "leg0/joint2".into()],
+                &[0.3, -0.2],
+                0.0
+            )
+            .unwrap_err(),
+            Rejection::DuplicateJoint {
+                module: "leg0".into(),
+                joint: "leg0/joint2".into()
             }
         );
         let err = c

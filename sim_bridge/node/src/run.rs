@@ -97,6 +97,10 @@ struct Counters {
     lockstep_timeouts: u64,
     /// Modules a lockstep step waited for in vain that have not spoken since.
     lockstep_silent: BTreeSet<String>,
+    /// Real time: steps that began more than one control period after their tick.
+    late_steps: u64,
+    /// Real time: the latest any step began after its tick [s].
+    max_step_late_s: f64,
 }
 
 /// The ROS side of the bridge: publishers, subscriptions.
@@ -450,6 +454,15 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             }
         };
         if due {
+            if let Mode::RealTime { .. } = config.mode {
+                let late_s = Instant::now()
+                    .saturating_duration_since(next_tick)
+                    .as_secs_f64();
+                counters.max_step_late_s = counters.max_step_late_s.max(late_s);
+                if late_s > control_dt {
+                    counters.late_steps += 1;
+                }
+            }
             if let Mode::Lockstep { timeout } = config.mode {
                 let silent = lockstep.missing();
                 if !lockstep.ready() {
@@ -590,6 +603,14 @@ fn diagnostics(
             value: counters.lockstep_timeouts.to_string(),
         },
         KeyValue {
+            key: "late_steps".into(),
+            value: counters.late_steps.to_string(),
+        },
+        KeyValue {
+            key: "max_step_late_ms".into(),
+            value: format!("{:.1}", counters.max_step_late_s * 1e3),
+        },
+        KeyValue {
             key: "lockstep_silent".into(),
             value: counters
                 .lockstep_silent
@@ -603,6 +624,7 @@ fn diagnostics(
         "non_finite",
         "wrong_length",
         "unknown_joint",
+        "duplicate_joint",
         "wrong_module",
         "too_large",
     ] {
