@@ -6,6 +6,7 @@ mod bench_learn;
 mod bridge;
 mod engine;
 mod eval;
+mod report;
 mod sim;
 mod train;
 
@@ -55,6 +56,11 @@ enum Command {
     Bench {
         #[command(subcommand)]
         what: bench::BenchCommand,
+    },
+    /// Reports computed from the shipped configs and models.
+    Report {
+        #[command(subcommand)]
+        what: report::ReportCommand,
     },
 }
 
@@ -113,5 +119,6 @@ fn run() -> Result<()> {
         Command::Train { what } => train::run(what),
         Command::Eval { what } => eval::run(what),
         Command::Bench { what } => bench::run(what),
+        Command::Report { what } => report::run(what),
     }
 }

@@ -261,9 +261,18 @@ fn train<E: Environment>(
     let metric_names = envs.first().map(|e| e.metric_names()).unwrap_or(&[]);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("metrics.csv");
-    let mut csv = std::fs::File::create(&csv_path)
-        .with_context(|| format!("creating {}", csv_path.display()))?;
-    writeln!(csv, "{}", header(metric_names))?;
+    // A resumed run goes on writing the metrics of the run it resumes, when they are here.
+    let append = args.resume.is_some() && csv_path.exists();
+    let mut csv = std::fs::OpenOptions::new()
+        .create(true)
+        .write(true)
+        .append(append)
+        .truncate(!append)
+        .open(&csv_path)
+        .with_context(|| format!("opening {}", csv_path.display()))?;
+    if !append {
+        writeln!(csv, "{}", header(metric_names))?;
+    }
 
     let total = config.total_steps;
     let mut trainer = Trainer::new(config, envs)?;
@@ -288,7 +297,20 @@ fn train<E: Environment>(
         .expect("a valid template"),
     );
     bar.set_position(trainer.env_steps);
+    // Ctrl-C ends the run after the current iteration, with a checkpoint and the policy.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flag = stop.clone();
+    let _ = ctrlc::set_handler(move || flag.store(true, std::sync::atomic::Ordering::Relaxed));
     while trainer.env_steps < total {
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            bar.suspend(|| {
+                eprintln!(
+                    "stopped by Ctrl-C at {} of {total} steps: saving the checkpoint and the policy",
+                    trainer.env_steps
+                )
+            });
+            break;
+        }
         let s = trainer.iterate();
         let wall = start.elapsed().as_secs_f64();
         writeln!(csv, "{}", row(&s, wall))?;

@@ -102,7 +102,7 @@ fn settles_after_moving_and_driving(engine: Engine) -> (f64, f64, f64) {
         .modules_with_role(Role::Wheel)
         .map(|m| m.name.clone())
         .collect();
-    let mut run = |w: &mut Box<dyn kumi_worlds::SimWorld>, velocity: f64, steps: usize| {
+    let run = |w: &mut Box<dyn kumi_worlds::SimWorld>, velocity: f64, steps: usize| {
         for m in &wheels {
             w.set_wheel_velocity(m, velocity).unwrap();
         }
