@@ -447,3 +447,33 @@ fn logs_carry_no_colour_codes_when_not_on_a_terminal() {
         "colour codes in a log file: {log:?}"
     );
 }
+
+#[test]
+fn the_example_morphology_stands_and_its_whole_body_task_builds() {
+    // examples/caterpillar.toml: a robot kumi does not ship, from the shipped modules, no code.
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let morphology = format!("{root}/examples/caterpillar.toml");
+    let out = kumi(&["sim", &morphology, "--seconds", "2", "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["morphology"], "caterpillar");
+    assert!(report["max_tilt_rad"].as_f64().unwrap() < 0.1, "{report}");
+    let config = format!("{root}/examples/caterpillar_whole_body.toml");
+    let out = kumi(&[
+        "eval",
+        "whole-body",
+        &morphology,
+        "--config",
+        &config,
+        "--policy",
+        "no-such-policy.onnx",
+    ]);
+    // It gets as far as the policy file: the robot and its terms were built from the files.
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("no-such-policy.onnx"), "{err}");
+}

@@ -336,6 +336,11 @@ fn a_tiny_whole_body_task_is_learnt() {
         trainer.iterate();
     }
     let after = final_distance(&trainer, &make, 8);
-    eprintln!("final distance to the target: {before:.3} m untrained, {after:.3} m after 14,400 steps");
-    assert!(after < before * 0.8, "not learnt: {before:.3} m -> {after:.3} m");
+    eprintln!(
+        "final distance to the target: {before:.3} m untrained, {after:.3} m after 14,400 steps"
+    );
+    assert!(
+        after < before * 0.8,
+        "not learnt: {before:.3} m -> {after:.3} m"
+    );
 }

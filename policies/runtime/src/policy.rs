@@ -74,23 +74,21 @@ impl FromStr for BackendChoice {
 
 #[derive(Debug, thiserror::Error)]
 pub enum RuntimeError {
-    #[error("{path}: {source}")]
-    Read {
-        path: String,
-        source: std::io::Error,
-    },
+    // The causes are in the messages, not `#[source]`: `{:#}` would print them twice.
+    #[error("{path}: {error}")]
+    Read { path: String, error: std::io::Error },
     #[error("{path}: not an ONNX model: {message}")]
     Decode { path: String, message: String },
-    #[error("{path}: does not fit module `{module}`: {source}")]
+    #[error("{path}: does not fit module `{module}`: {mismatch}")]
     Metadata {
         path: String,
         module: String,
-        source: Box<MetadataMismatch>,
+        mismatch: Box<MetadataMismatch>,
     },
-    #[error("{path}: does not fit this robot and skill: {source}")]
+    #[error("{path}: does not fit this robot and skill: {mismatch}")]
     Contract {
         path: String,
-        source: Box<ContractMismatch>,
+        mismatch: Box<ContractMismatch>,
     },
     #[error("{path}: {what} has shape {found}, the policy's contract needs {expected}")]
     Shape {
@@ -169,9 +167,9 @@ impl fmt::Debug for Network {
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, RuntimeError> {
-    std::fs::read(path).map_err(|source| RuntimeError::Read {
+    std::fs::read(path).map_err(|error| RuntimeError::Read {
         path: path.display().to_string(),
-        source,
+        error,
     })
 }
 
@@ -277,10 +275,10 @@ impl SkillPolicy {
         let file = decode(bytes, label)?;
         skill
             .check(&file.metadata)
-            .map_err(|source| RuntimeError::Metadata {
+            .map_err(|mismatch| RuntimeError::Metadata {
                 path: label.to_string(),
                 module: skill.module.clone(),
-                source: Box::new(source),
+                mismatch: Box::new(mismatch),
             })?;
         Ok(Self {
             net: Network::new(file, label, choice, OBSERVATION_DIM, JOINTS)?,
@@ -345,10 +343,10 @@ impl WholeBodyPolicy {
         choice: BackendChoice,
     ) -> Result<Self, RuntimeError> {
         let file = decode(bytes, label)?;
-        kumi_terms::contract::check(expected, &file.metadata).map_err(|source| {
+        kumi_terms::contract::check(expected, &file.metadata).map_err(|mismatch| {
             RuntimeError::Contract {
                 path: label.to_string(),
-                source: Box::new(source),
+                mismatch: Box::new(mismatch),
             }
         })?;
         let dim = |key: &str| {
