@@ -1,6 +1,6 @@
 //! The arm skill's contract with the module it drives, derived once from the robot model and
 //! the control rate: joint order and the action scale. (Joint ranges stay with the module's
-//! actuators, which clamp increments everywhere through `kumi_engine::apply_increments`.) Training, evaluation and
+//! actuators, which clamp increments everywhere through `kumi_model::commands::apply_increments`.) Training, evaluation and
 //! the arm-module node all build one from the same model, and an exported policy carries it in
 //! its metadata, so a policy trained for other joints, limits or rates is refused, not run.
 

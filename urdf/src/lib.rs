@@ -8,6 +8,7 @@
 
 mod assemble;
 mod catalog;
+pub mod commands;
 mod error;
 pub mod kinematics;
 mod module;

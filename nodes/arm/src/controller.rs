@@ -3,13 +3,13 @@
 //! training environment uses, and the action becomes increments by [`ArmSkill::increments`].
 //!
 //! **Who owns the servo targets.** Increments are applied to the targets by whoever holds them,
-//! through [`kumi_engine::apply_increments`] (the one rule: add, then clamp to the joint range).
+//! through [`kumi_model::commands::apply_increments`] (the one rule: add, then clamp to the joint range).
 //! With the sim bridge, the bridge holds them: the node sends the skill's increments as they are
 //! and keeps no copy, so a `joint_set` from another publisher, a restarted bridge or a clamped
 //! command cannot leave the node computing from targets that no longer exist. With Motion Stack
 //! (absolute targets) the node holds them itself, starting from the measured joint angles and
 //! starting over from them whenever it resumes after holding.
-use kumi_engine::apply_increments;
+use kumi_model::commands::apply_increments;
 use kumi_model::Actuator;
 use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::ArmSkill;
@@ -36,7 +36,7 @@ pub enum Hold {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Command {
     /// The skill's increments [rad] for this step (zero when holding), for the holder of the
-    /// targets to apply with [`kumi_engine::apply_increments`].
+    /// targets to apply with [`kumi_model::commands::apply_increments`].
     pub increments: [f64; JOINTS],
     /// Absolute joint targets [rad] when the node holds the targets itself (Motion Stack):
     /// the increments applied to the node's own targets. `None` until a joint state has been

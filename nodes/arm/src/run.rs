@@ -116,7 +116,7 @@ impl Prepared {
                     .collect::<Vec<_>>()
                     .join(", "),
             })?;
-        let control_hz = kumi_engine::SimConfig::for_model(model).control_hz;
+        let control_hz = kumi_model::commands::CONTROL_HZ;
         let skill = ArmSkill::new(module, control_hz)?;
         let mut policy = SkillPolicy::load(&config.policy, &skill, config.backend)?;
         info!(

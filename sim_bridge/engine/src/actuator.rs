@@ -1,5 +1,7 @@
 //! The actuator law applied before every physics step: pure functions, so the same limits hold
-//! in training, evaluation and the bridge.
+//! in training, evaluation and the bridge. The rules for commands themselves (clamping, the
+//! meaning of increments, the control rate) belong to the robot model
+//! ([`kumi_model::commands`]), so that nodes on hardware use them without a simulator.
 
 use kumi_model::{Actuator, ActuatorMode};
 
@@ -25,41 +27,6 @@ impl ServoState {
             setpoint: q,
         }
     }
-}
-
-/// Clamps a raw command to the actuator's limits; `None` for a non-finite command.
-pub fn clamp_command(actuator: &Actuator, command: f64) -> Option<f64> {
-    if !command.is_finite() {
-        return None;
-    }
-    Some(match actuator.mode {
-        ActuatorMode::Position => actuator.clamp_position(command),
-        ActuatorMode::Velocity => actuator.clamp_velocity(command),
-    })
-}
-
-/// The meaning of joint increments, everywhere (training, the bridge, the arm node): each
-/// target moves by its increment [rad] and is clamped to its joint's range. `None` if any
-/// increment is non-finite or the lengths differ.
-pub fn apply_increments(
-    targets: &[f64],
-    increments: &[f64],
-    actuators: &[&Actuator],
-) -> Option<Vec<f64>> {
-    if targets.len() != increments.len()
-        || targets.len() != actuators.len()
-        || increments.iter().any(|d| !d.is_finite())
-    {
-        return None;
-    }
-    Some(
-        targets
-            .iter()
-            .zip(increments)
-            .zip(actuators)
-            .map(|((t, d), a)| a.clamp_position(t + d))
-            .collect(),
-    )
 }
 
 /// Moves a position set-point toward the command by at most `velocity_limit * dt` [rad].
@@ -95,22 +62,6 @@ pub fn integrate_velocity_setpoint(
 mod tests {
     use super::*;
 
-    fn arm_joint() -> Actuator {
-        Actuator {
-            joint: "j".into(),
-            mode: ActuatorMode::Position,
-            stiffness: 800.0,
-            damping: 60.0,
-            armature: 0.1,
-            joint_damping: 2.0,
-            joint_friction: 0.0,
-            effort_limit: 136.0,
-            velocity_limit: 1.5,
-            lower: -2.0,
-            upper: 2.0,
-        }
-    }
-
     #[test]
     fn slew_is_rate_limited_and_lands_exactly() {
         // 1.5 rad/s over 1/120 s is 0.0125 rad per step.
@@ -129,37 +80,5 @@ mod tests {
             sp = integrate_velocity_setpoint(sp, 5.0, 0.0, 0.45, 0.01);
         }
         assert_eq!(sp, 0.45);
-    }
-
-    #[test]
-    fn increments_move_targets_and_clamp_to_the_range() {
-        let a = arm_joint(); // range [-2, 2]
-        let joints = [&a, &a, &a];
-        assert_eq!(
-            apply_increments(&[0.0, 1.9, -1.0], &[0.1, 0.3, -0.5], &joints),
-            Some(vec![0.1, 2.0, -1.5])
-        );
-        assert_eq!(
-            apply_increments(&[0.0; 3], &[0.1, f64::NAN, 0.0], &joints),
-            None
-        );
-        assert_eq!(apply_increments(&[0.0; 3], &[0.1; 2], &joints), None);
-    }
-
-    #[test]
-    fn commands_are_clamped_and_non_finite_rejected() {
-        let a = arm_joint();
-        assert_eq!(clamp_command(&a, 3.0), Some(2.0));
-        assert_eq!(clamp_command(&a, -3.0), Some(-2.0));
-        assert_eq!(clamp_command(&a, f64::NAN), None);
-        assert_eq!(clamp_command(&a, f64::INFINITY), None);
-        let wheel = Actuator {
-            mode: ActuatorMode::Velocity,
-            velocity_limit: 5.0,
-            lower: f64::NEG_INFINITY,
-            upper: f64::INFINITY,
-            ..a
-        };
-        assert_eq!(clamp_command(&wheel, 9.0), Some(5.0));
     }
 }

@@ -29,7 +29,7 @@ pub struct SimConfig {
 impl Default for SimConfig {
     fn default() -> Self {
         Self {
-            control_hz: 30.0,
+            control_hz: kumi_model::commands::CONTROL_HZ,
             substeps: 4,
             mujoco_substeps: 4,
             solver_iterations: 4,

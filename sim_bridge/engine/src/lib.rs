@@ -15,13 +15,12 @@ mod groups;
 mod servos;
 mod world;
 
-pub use actuator::{
-    apply_increments, clamp_command, integrate_velocity_setpoint, max_lead, slew, ServoState,
-};
+pub use actuator::{integrate_velocity_setpoint, max_lead, slew, ServoState};
 pub use config::SimConfig;
 pub use engine::Engine;
 pub use error::SimError;
 pub use groups::{contact_groups, mount_is_impulse};
+pub use kumi_model::commands::{apply_increments, clamp_command, CONTROL_HZ};
 pub use kumi_model::Layout;
 pub use servos::{ServoBank, ServoTarget};
 pub use world::{home_joint_positions, Contact, RobotState, SimWorld, Snapshot, GROUND};

@@ -5,8 +5,9 @@ use std::ops::Range;
 
 use kumi_model::{Actuator, ActuatorMode, RobotModel};
 
-use crate::actuator::{clamp_command, integrate_velocity_setpoint, max_lead, slew, ServoState};
+use crate::actuator::{integrate_velocity_setpoint, max_lead, slew, ServoState};
 use crate::error::SimError;
+use kumi_model::commands::clamp_command;
 
 /// Every actuator of a robot with its servo state, in the model's actuator order.
 #[derive(Debug, Clone, PartialEq)]

@@ -7,11 +7,11 @@ use std::sync::Arc;
 use kumi_model::{ActuatorMode, RobotModel};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
-use crate::actuator::apply_increments;
 use crate::config::SimConfig;
 use crate::engine::Engine;
 use crate::error::SimError;
 use crate::servos::ServoBank;
+use kumi_model::commands::apply_increments;
 
 /// A joint configuration and base pose to place the robot at.
 #[derive(Debug, Clone, PartialEq)]
