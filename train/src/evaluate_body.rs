@@ -43,7 +43,11 @@ impl BodyEvaluation {
             self.engine,
             row("final position error [m]", &self.position_error_m),
             row("final yaw error [rad]", &self.yaw_error_rad),
-            row("leg tool orientation [rad]", &self.leg_orientation_rad),
+            if self.leg_orientation_rad.mean.is_nan() {
+                "| leg tool orientation [rad] | no legs | | | |\n".to_string()
+            } else {
+                row("leg tool orientation [rad]", &self.leg_orientation_rad)
+            },
             row("undesired contacts [steps/episode]", &self.contacts_per_episode),
             self.terminations,
             self.rollouts,
