@@ -10,10 +10,11 @@ Run from the repository root with the Python that has rclpy (`bash .ci/run` crea
 
 Each node is the release `kumi` binary in its own process; their logs, and a CSV of the memory
 samples, go to --out (default runs/soak). The manipulator alternates between two goals 5 cm
-apart every 5 s; every leg is sent its own starting tool pose, so that its policy runs.
+apart (±2.5 cm around its starting pose) every 5 s; every leg is sent its own starting tool pose, so that its policy runs.
 """
 
 import argparse
+import copy
 import json
 import os
 import signal
@@ -82,71 +83,75 @@ def main():
     env.pop("RUST_LOG", None)  # the nodes' own default filter
     os.environ["ROS_DOMAIN_ID"] = str(args.domain)
 
-    procs = {"bridge": start(args.kumi, ["sim-bridge", args.morphology, "--robot", robot], args.out, "bridge", env)}
-    time.sleep(2.0)
-    for name, _ in arms:
-        procs[name] = start(args.kumi, ["arm", name, "--robot", robot, "--morphology", args.morphology],
-                            args.out, name, env)
+    procs = {}
+    dead = []
+    try:
+        procs["bridge"] = start(args.kumi, ["sim-bridge", args.morphology, "--robot", robot], args.out, "bridge", env)
+        time.sleep(2.0)
+        for name, _ in arms:
+            procs[name] = start(args.kumi, ["arm", name, "--robot", robot, "--morphology", args.morphology],
+                                args.out, name, env)
 
-    rclpy.init()
-    node = rclpy.create_node("kumi_soak")
-    ee, goals, diag = {}, {}, {}
-    for name, _ in arms:
-        node.create_subscription(PoseStamped, f"/{robot}/{name}/ee_pose", lambda m, n=name: ee.setdefault(n, m), 10)
-        goals[name] = node.create_publisher(PoseStamped, f"/{robot}/{name}/goal_pose", 10)
+        rclpy.init()
+        node = rclpy.create_node("kumi_soak")
+        ee, goals, diag = {}, {}, {}
+        for name, _ in arms:
+            node.create_subscription(PoseStamped, f"/{robot}/{name}/ee_pose", lambda m, n=name: ee.setdefault(n, m), 10)
+            goals[name] = node.create_publisher(PoseStamped, f"/{robot}/{name}/goal_pose", 10)
 
-    def on_diag(m):
-        for s in m.status:
-            diag[s.name] = {kv.key: kv.value for kv in s.values}
+        def on_diag(m):
+            for s in m.status:
+                diag[s.name] = {kv.key: kv.value for kv in s.values}
 
-    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+        node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
 
-    samples = []  # (t, {process: rss})
-    csv = open(os.path.join(args.out, "memory.csv"), "w")
-    csv.write("t_s," + ",".join(f"{k}_rss_kib" for k in procs) + "\n")
-    t0 = time.monotonic()
-    next_goal, next_sample, flip = t0, t0, 1
-    max_late_ms, rtf_min = 0.0, None
-    while time.monotonic() - t0 < args.seconds:
-        rclpy.spin_once(node, timeout_sec=0.1)
-        now = time.monotonic()
-        dead = [k for k, pr in procs.items() if pr.poll() is not None]
-        if dead:
-            print(f"error: {', '.join(dead)} exited", file=sys.stderr)
-            break
-        if now >= next_goal and len(ee) == len(arms):
-            for name, role in arms:
-                goal = PoseStamped()
-                goal.header.frame_id = ee[name].header.frame_id
-                goal.pose = ee[name].pose
-                if role == "manipulator":
-                    goal.pose.position.z += 0.025 * flip
-                goals[name].publish(goal)
-            flip, next_goal = -flip, now + 5.0
-        if now >= next_sample:
-            row = {k: rss_kib(pr.pid) for k, pr in procs.items()}
-            samples.append((now - t0, row))
-            csv.write(f"{now - t0:.1f}," + ",".join(str(row[k]) for k in procs) + "\n")
-            csv.flush()
-            bridge = diag.get(f"kumi sim bridge: {robot}", {})
-            if "realtime_factor" in bridge and now - t0 > 10:
-                rtf = float(bridge["realtime_factor"])
-                rtf_min = rtf if rtf_min is None else min(rtf_min, rtf)
-            next_sample = now + 10.0
-    elapsed = time.monotonic() - t0
-    bridge = dict(diag.get(f"kumi sim bridge: {robot}", {}))
-    nodes = {name: dict(diag.get(f"kumi arm node: {robot}/{name}", {})) for name, _ in arms}
-    node.destroy_node()
-    rclpy.try_shutdown()
-    for pr in procs.values():
-        if pr.poll() is None:
-            pr.send_signal(signal.SIGINT)
-    for pr in procs.values():
-        try:
-            pr.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            pr.kill()
+        samples = []  # (t, {process: rss})
+        csv = open(os.path.join(args.out, "memory.csv"), "w")
+        csv.write("t_s," + ",".join(f"{k}_rss_kib" for k in procs) + "\n")
+        t0 = time.monotonic()
+        next_goal, next_sample, flip = t0, t0, 1
+        rtf_min = None
+        while time.monotonic() - t0 < args.seconds:
+            rclpy.spin_once(node, timeout_sec=0.1)
+            now = time.monotonic()
+            dead = [k for k, pr in procs.items() if pr.poll() is not None]
+            if dead:
+                print(f"error: {', '.join(dead)} exited", file=sys.stderr)
+                break
+            if now >= next_goal and len(ee) == len(arms):
+                for name, role in arms:
+                    goal = PoseStamped()
+                    goal.header.frame_id = ee[name].header.frame_id
+                    goal.pose = copy.deepcopy(ee[name].pose)
+                    if role == "manipulator":
+                        goal.pose.position.z += 0.025 * flip
+                    goals[name].publish(goal)
+                flip, next_goal = -flip, now + 5.0
+            if now >= next_sample:
+                row = {k: rss_kib(pr.pid) for k, pr in procs.items()}
+                samples.append((now - t0, row))
+                csv.write(f"{now - t0:.1f}," + ",".join(str(row[k]) for k in procs) + "\n")
+                csv.flush()
+                bridge = diag.get(f"kumi sim bridge: {robot}", {})
+                if "realtime_factor" in bridge and now - t0 > 10:
+                    rtf = float(bridge["realtime_factor"])
+                    rtf_min = rtf if rtf_min is None else min(rtf_min, rtf)
+                next_sample = now + 10.0
+        elapsed = time.monotonic() - t0
+        bridge = dict(diag.get(f"kumi sim bridge: {robot}", {}))
+        nodes = {name: dict(diag.get(f"kumi arm node: {robot}/{name}", {})) for name, _ in arms}
+        node.destroy_node()
+        rclpy.try_shutdown()
 
+    finally:
+        for pr in procs.values():
+            if pr.poll() is None:
+                pr.send_signal(signal.SIGINT)
+        for pr in procs.values():
+            try:
+                pr.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                pr.kill()
     warnings = []
     for k in procs:
         with open(os.path.join(args.out, k + ".log")) as f:
@@ -168,6 +173,7 @@ def main():
         "realtime_factor_min": rtf_min,
         "arm_nodes": {name: {key: d.get(key) for key in ("goals_accepted", "stale_holds", "policy_failures",
                                                            "sim_restarts")} for name, d in nodes.items()},
+        "exited": dead,
         "warnings": len(warnings),
         "first_warnings": warnings[:10],
         "out": args.out,
@@ -176,7 +182,10 @@ def main():
         print(json.dumps(report))
     else:
         print(json.dumps(report, indent=2))
-    return 0 if not warnings and len(samples) > 0 else 1
+    if dead:
+        print(f"error: {', '.join(dead)} exited during the soak", file=sys.stderr)
+    ok = not warnings and not dead and elapsed >= 0.99 * args.seconds
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

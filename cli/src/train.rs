@@ -245,6 +245,32 @@ fn training_engine(args: &RunArgs) -> Result<kumi_worlds::Engine> {
     Ok(engine)
 }
 
+/// `metrics.csv` for writing. A resumed run goes on with the file of the run it resumes when it
+/// is there, without the rows past the checkpoint (a run that died after its last checkpoint
+/// wrote them, and will write them again); a new run starts it afresh.
+fn open_metrics(path: &std::path::Path, resumed: bool, iteration: usize) -> Result<std::fs::File> {
+    let kept = if resumed && path.exists() {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut lines = text.lines();
+        let mut kept: Vec<&str> = lines.next().into_iter().collect();
+        kept.extend(lines.filter(|l| {
+            l.split(',')
+                .next()
+                .and_then(|i| i.parse::<usize>().ok())
+                .is_some_and(|i| i <= iteration)
+        }));
+        kept.join("\n") + "\n"
+    } else {
+        String::new()
+    };
+    std::fs::write(path, kept).with_context(|| format!("writing {}", path.display()))?;
+    std::fs::OpenOptions::new()
+        .append(true)
+        .open(path)
+        .with_context(|| format!("opening {}", path.display()))
+}
+
 /// The one training runner: PPO over `envs` until `config.total_steps`, with metrics.csv,
 /// progress (a bar on a terminal, a line every few iterations otherwise), checkpoints and
 /// resume; then the deterministic actor exported to `out/<name>.onnx` with `metadata` (its
@@ -260,20 +286,6 @@ fn train<E: Environment>(
 ) -> Result<PathBuf> {
     let metric_names = envs.first().map(|e| e.metric_names()).unwrap_or(&[]);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let csv_path = out.join("metrics.csv");
-    // A resumed run goes on writing the metrics of the run it resumes, when they are here.
-    let append = args.resume.is_some() && csv_path.exists();
-    let mut csv = std::fs::OpenOptions::new()
-        .create(true)
-        .write(true)
-        .append(append)
-        .truncate(!append)
-        .open(&csv_path)
-        .with_context(|| format!("opening {}", csv_path.display()))?;
-    if !append {
-        writeln!(csv, "{}", header(metric_names))?;
-    }
-
     let total = config.total_steps;
     let mut trainer = Trainer::new(config, envs)?;
     if let Some(dir) = &args.resume {
@@ -283,6 +295,11 @@ fn train<E: Environment>(
             dir.display(),
             trainer.env_steps
         );
+    }
+    let csv_path = out.join("metrics.csv");
+    let mut csv = open_metrics(&csv_path, args.resume.is_some(), trainer.iteration)?;
+    if csv.metadata()?.len() == 0 {
+        writeln!(csv, "{}", header(metric_names))?;
     }
     let checkpoint = out.join("checkpoint");
     let start = Instant::now();

@@ -12,8 +12,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use kumi_tests::{
-    fresh_domain, peer, reach_arm_goal, reach_arm_goal_in, watch_arm, KumiProcess, ARM_GOAL,
-    REACH_BOUND_M,
+    distance, fresh_domain, numbers, peer, reach, reach_arm_goal, reach_arm_goal_in, watch_arm,
+    KumiProcess, ARM_GOAL, ARM_GOAL_2, REACH_BOUND_M,
 };
 
 const KUMI: &str = env!("CARGO_BIN_EXE_kumi");
@@ -51,10 +51,17 @@ fn number(v: &serde_json::Value) -> f64 {
         .unwrap_or_else(|| panic!("not a number: {v}"))
 }
 
-/// Sends [`ARM_GOAL`] after a restart; returns the tool's error and the seconds since `since`.
+/// Sends [`ARM_GOAL_2`] after a restart (the arm stood at [`ARM_GOAL`], or at home in a new
+/// simulator: either way beyond the bound, which is checked, so the tool must move);
+/// returns the tool's error and the seconds since `since`.
 fn reach_after(domain: u16, since: Instant) -> (f64, f64, serde_json::Value) {
     let bound = REACH_BOUND_M.to_string();
-    let (error, out) = reach_arm_goal(domain, 8.0, &["--within", &bound]);
+    let (error, out) = reach(&[], domain, &ARM_GOAL_2, 8.0, &["--within", &bound]);
+    let from = distance(&numbers(&out["start_position"]), &ARM_GOAL_2);
+    assert!(
+        from > REACH_BOUND_M,
+        "the tool already stood {from:.3} m from the goal: {out}"
+    );
     (error, since.elapsed().as_secs_f64(), out)
 }
 
@@ -125,6 +132,13 @@ fn a_sigkilled_arm_node_is_noticed_the_arm_holds_and_a_new_node_takes_over() {
 
 /// The largest resident memory of `pids` [KiB] while `run` runs, sampled every 20 ms.
 fn peak_rss<T>(processes: &[&KumiProcess], run: impl FnOnce() -> T) -> (T, Vec<u64>) {
+    /// Stops the sampler however `run` ends (a panic included).
+    struct Stop(Arc<AtomicBool>);
+    impl Drop for Stop {
+        fn drop(&mut self) {
+            self.0.store(true, Ordering::Relaxed);
+        }
+    }
     let pids: Vec<u32> = processes.iter().map(|p| p.pid()).collect();
     let done = Arc::new(AtomicBool::new(false));
     let flag = done.clone();
@@ -138,8 +152,9 @@ fn peak_rss<T>(processes: &[&KumiProcess], run: impl FnOnce() -> T) -> (T, Vec<u
         }
         peak
     });
+    let stop = Stop(done);
     let out = run();
-    done.store(true, Ordering::Relaxed);
+    drop(stop);
     (out, sampler.join().unwrap())
 }
 
@@ -173,16 +188,7 @@ fn flood(domain: u16) -> serde_json::Value {
 
 /// The flood's checks: the last goal won, and every kind of bad payload was counted.
 fn check_flood(out: &serde_json::Value) {
-    let p: Vec<f64> = out["position"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(number)
-        .collect();
-    let error = (0..3)
-        .map(|k| (p[k] - ARM_GOAL[k]).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let error = distance(&numbers(&out["position"]), &ARM_GOAL);
     assert!(
         error < REACH_BOUND_M,
         "the last goal did not win: tool {error:.3} m away: {out}"
@@ -278,6 +284,10 @@ impl Namespaces {
             names: names.clone(),
         };
         let (veth_a, veth_b) = (format!("{tag}va"), format!("{tag}vb"));
+        // Left over by a run that was killed (its veth pair went with them).
+        for name in &names {
+            let _ = ip(&["netns", "del", name]);
+        }
         ip(&["netns", "add", a])?;
         ip(&["netns", "add", b])?;
         ip(&[

@@ -321,6 +321,7 @@ def cmd_reach(args, peer):
         peer.spin_until(lambda: sim() >= t0 + 2.0, args.timeout)
     start, wall = sim(), time.monotonic()
     target = [float(v) for v in args.goal.split(",")]
+    p0 = peer.latest[ee_topic].pose.position
     goal.publish(goal_msg(target, args.frame))
 
     def done():
@@ -332,7 +333,8 @@ def cmd_reach(args, peer):
     peer.spin_until(done, args.timeout)
     ee = peer.latest[ee_topic]
     p, o = ee.pose.position, ee.pose.orientation
-    return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall, "position": [p.x, p.y, p.z],
+    return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall, "start_position": [p0.x, p0.y, p0.z],
+            "position": [p.x, p.y, p.z],
             "orientation": [o.w, o.x, o.y, o.z], "frame": ee.header.frame_id}
 
 

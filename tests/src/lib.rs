@@ -115,6 +115,18 @@ impl Drop for Bridge {
     }
 }
 
+/// `program` as a command, run under `prefix` (`ip netns exec NS`) when there is one.
+fn command_under(prefix: &[&str], program: &std::ffi::OsStr) -> Command {
+    match prefix.split_first() {
+        Some((first, rest)) => {
+            let mut c = Command::new(first);
+            c.args(rest).arg(program);
+            c
+        }
+        None => Command::new(program),
+    }
+}
+
 /// Runs `tests/ros/peer.py <args>` on `domain` and returns its JSON result; kills it after
 /// `deadline`.
 pub fn peer(domain: u16, args: &[&str], deadline: Duration) -> serde_json::Value {
@@ -128,18 +140,8 @@ pub fn peer_in(
     args: &[&str],
     deadline: Duration,
 ) -> serde_json::Value {
-    let python = python();
-    let script = workspace().join("tests/ros/peer.py");
-    let mut command = match prefix.split_first() {
-        Some((program, rest)) => {
-            let mut c = Command::new(program);
-            c.args(rest).arg(&python);
-            c
-        }
-        None => Command::new(&python),
-    };
-    let mut child = command
-        .arg(script)
+    let mut child = command_under(prefix, python().as_os_str())
+        .arg(workspace().join("tests/ros/peer.py"))
         .args(args)
         .env("ROS_DOMAIN_ID", domain.to_string())
         .env("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
@@ -280,6 +282,10 @@ impl Drop for ArmNode {
 /// 0.5 rad about the tool's x axis).
 pub const ARM_GOAL: [f64; 7] = [0.35, 0.1, 1.0, 0.968_912_4, 0.247_403_96, 0.0, 0.0];
 
+/// A second goal in the same distribution, 0.3 m from [`ARM_GOAL`]: a test that must see the
+/// arm move after a restart sends it this one.
+pub const ARM_GOAL_2: [f64; 7] = [0.3, -0.15, 0.85, 0.968_912_4, 0.247_403_96, 0.0, 0.0];
+
 /// How close the tool must end [m]: the shipped skill's accuracy over ROS, not better than the
 /// skill itself. Over 1000 goals of the paper's box in rapier its final position error has mean
 /// 0.10 m and p90 0.17 m (`policies/arm_reach.md`); over ROS it ends 0.10 m from
@@ -300,8 +306,35 @@ pub fn reach_arm_goal_in(
     drive_s: f64,
     extra: &[&str],
 ) -> (f64, serde_json::Value) {
-    let goal: Vec<String> = ARM_GOAL.iter().map(|v| v.to_string()).collect();
-    let goal = goal.join(",");
+    reach(prefix, domain, &ARM_GOAL, drive_s, extra)
+}
+
+/// The distance [m] between the first three values of `a` and of `b`.
+pub fn distance(a: &[f64], b: &[f64]) -> f64 {
+    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// The numbers of a JSON array.
+pub fn numbers(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("not an array: {v}"))
+        .iter()
+        .map(|x| x.as_f64().unwrap_or_else(|| panic!("not a number: {x}")))
+        .collect()
+}
+
+/// Sends `goal` (x, y, z, qw, qx, qy, qz in the arm's base frame) to the arm node of robot
+/// `arm` through the rclpy peer (under `prefix`) and waits `drive_s` of sim time; returns the
+/// tool's final distance to the goal [m] and the peer's report.
+pub fn reach(
+    prefix: &[&str],
+    domain: u16,
+    goal: &[f64; 7],
+    drive_s: f64,
+    extra: &[&str],
+) -> (f64, serde_json::Value) {
+    let goal_text: Vec<String> = goal.iter().map(|v| v.to_string()).collect();
+    let goal_text = goal_text.join(",");
     let drive = drive_s.to_string();
     let mut args = vec![
         "reach",
@@ -310,7 +343,7 @@ pub fn reach_arm_goal_in(
         "--arm",
         "arm",
         "--goal",
-        &goal,
+        &goal_text,
         "--drive-seconds",
         &drive,
         "--timeout",
@@ -319,17 +352,7 @@ pub fn reach_arm_goal_in(
     args.extend_from_slice(extra);
     let out = peer_in(prefix, domain, &args, Duration::from_secs(90));
     assert!(out.get("error").is_none(), "{out}");
-    let p: Vec<f64> = out["position"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
-    let error = ((p[0] - ARM_GOAL[0]).powi(2)
-        + (p[1] - ARM_GOAL[1]).powi(2)
-        + (p[2] - ARM_GOAL[2]).powi(2))
-    .sqrt();
-    (error, out)
+    (distance(&numbers(&out["position"]), goal), out)
 }
 
 /// What the rclpy peer saw of robot `arm` (module `arm`) over `seconds` of wall time: its
@@ -385,15 +408,7 @@ impl KumiProcess {
             SERIAL.fetch_add(1, Ordering::Relaxed)
         ));
         let file = std::fs::File::create(&log).expect("create the log file");
-        let mut command = match prefix.split_first() {
-            Some((program, rest)) => {
-                let mut c = Command::new(program);
-                c.args(rest).arg(exe);
-                c
-            }
-            None => Command::new(exe),
-        };
-        let child = command
+        let child = command_under(prefix, exe.as_ref())
             .args(args)
             .env("ROS_DOMAIN_ID", domain.to_string())
             .env("ORT_DYLIB_PATH", onnxruntime_library())

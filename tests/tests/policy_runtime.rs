@@ -199,7 +199,12 @@ fn every_shipped_whole_body_policy_fits_its_robot_and_the_shipped_skill() {
         .unwrap();
         let config: Config = toml::from_str(&text).unwrap_or_else(|e| panic!("{name}: {e}"));
         let terms = kumi_terms::ActionTerms::new(&robot, &config.action).unwrap();
-        let expected = kumi_terms::contract::contract(&robot, &terms, &skill, 30.0);
+        let expected = kumi_terms::contract::contract(
+            &robot,
+            &terms,
+            &skill,
+            kumi_model::commands::CONTROL_HZ,
+        );
         let mut policy =
             kumi_runtime::WholeBodyPolicy::load(&path, &expected, BackendChoice::Tract)
                 .unwrap_or_else(|e| panic!("{name}: {e}"));

@@ -44,7 +44,8 @@ impl BodyEvaluation {
             row("final position error [m]", &self.position_error_m),
             row("final yaw error [rad]", &self.yaw_error_rad),
             if self.leg_orientation_rad.mean.is_nan() {
-                "| leg tool orientation [rad] | no legs | | | |\n".to_string()
+                "| leg tool orientation [rad] | n/a (no legs, or no episode ended standing) | | | |\n"
+                    .to_string()
             } else {
                 row("leg tool orientation [rad]", &self.leg_orientation_rad)
             },

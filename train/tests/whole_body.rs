@@ -306,8 +306,8 @@ const ITERATIONS: usize = 80;
 #[test]
 fn a_tiny_whole_body_task_is_learnt() {
     // Minimal, 2 s episodes, the target within 0.8 m of a base that starts at the origin: the
-    // untrained policy barely moves (measured: MuJoCo 1.24 m -> 0.57 m, rapier 1.23 m -> 0.75 m
-    // after 30 iterations); driving toward the target (forward or back, the one way a
+    // untrained policy barely moves (measured: MuJoCo 1.24 m -> 0.57 m after 80 iterations,
+    // rapier 1.23 m -> 0.75 m after 30); driving toward the target (forward or back, the one way a
     // lone wheel module goes) and reaching with the arm must bring the tool closer.
     let mut body = config(0.6);
     body.task = TaskConfig {

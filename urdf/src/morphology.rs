@@ -262,7 +262,8 @@ impl Morphology {
                             )),
                         ));
                     }
-                    // Beyond a turn or two, sin and cos of huge angles make NaN poses.
+                    // A spin is an angle: two turns either way is more than any mount needs, and
+                    // 1e308 rad gave NaN poses in the assembled model (found by fuzzing).
                     if raw_mount.spin.is_nan() || raw_mount.spin.abs() > 4.0 * std::f64::consts::PI
                     {
                         return Err(ModelError::new(

@@ -454,12 +454,13 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             }
         };
         if due {
-            if let Mode::RealTime { .. } = config.mode {
+            if let Mode::RealTime { factor } = config.mode {
                 let late_s = Instant::now()
                     .saturating_duration_since(next_tick)
                     .as_secs_f64();
                 counters.max_step_late_s = counters.max_step_late_s.max(late_s);
-                if late_s > control_dt {
+                // One control period of wall time.
+                if late_s > control_dt / factor {
                     counters.late_steps += 1;
                 }
             }
