@@ -134,6 +134,19 @@ def diag_values(peer, timeout=4.0):
     return {kv["key"]: kv["value"] for kv in status["values"]} | {"_level": status["level"], "_message": status["message"]}
 
 
+def latest_diagnostics(peer):
+    """Subscribes to /diagnostics; returns the dict it keeps filled: status name -> its latest
+    key/value pairs."""
+    statuses = {}
+
+    def on_diag(m):
+        for status in m.status:
+            statuses[status.name] = {kv.key: kv.value for kv in status.values}
+
+    peer.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DEFAULT)
+    return statuses
+
+
 def cmd_observe(args, peer):
     arms, wheels = args.arms.split(","), [w for w in args.wheels.split(",") if w]
     r = args.robot
@@ -347,13 +360,7 @@ def cmd_flood(args, peer):
     r, a = args.robot, args.arm
     ee_topic = f"/{r}/{a}/ee_pose"
     peer.listen(PoseStamped, ee_topic)  # not /clock: this peer sends junk there
-    statuses = {}
-
-    def on_diag(m):
-        for status in m.status:
-            statuses[status.name] = {kv.key: kv.value for kv in status.values}
-
-    peer.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DEFAULT)
+    statuses = latest_diagnostics(peer)
     goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
     states = peer.create_publisher(JointState, f"/{r}/{a}/joint_states", DEFAULT)
     clock = peer.create_publisher(Clock, "/clock", DEFAULT)
@@ -451,13 +458,7 @@ def cmd_malformed(args, peer):
     r, a = args.robot, args.arm
     js_topic = f"/{r}/{a}/joint_states"
     peer.listen(JointState, js_topic)
-    statuses = {}
-
-    def on_diag(m):
-        for status in m.status:
-            statuses[status.name] = {kv.key: kv.value for kv in status.values}
-
-    peer.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DEFAULT)
+    statuses = latest_diagnostics(peer)
     goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
     jset = peer.create_publisher(JointState, f"/{r}/{a}/joint_set", DEFAULT)
     inc = peer.create_publisher(Float64MultiArray, f"/{r}/{a}/joint_increments", DEFAULT)
