@@ -53,11 +53,19 @@ pub struct ArmArgs {
     /// Joint states older than this [s] make the node hold.
     #[arg(long, default_value_t = 0.2)]
     pub stale_after: f64,
+    /// With a whole-body node sending the goals: wait up to this long [ms] for the goal computed
+    /// from a tick's state before acting on that tick's joint states (sim time only), so the
+    /// skill acts on the same tick's goal, as in training. 0: act on the latest goal at once.
+    #[arg(long, default_value_t = 0.0)]
+    pub goal_sync_ms: f64,
 }
 
 pub fn run(args: ArmArgs) -> Result<()> {
     if !(args.stale_after.is_finite() && args.stale_after > 0.0) {
         bail!("--stale-after must be a positive number of seconds");
+    }
+    if !(args.goal_sync_ms.is_finite() && args.goal_sync_ms >= 0.0) {
+        bail!("--goal-sync-ms must be a number of milliseconds >= 0");
     }
     let model = load_model(args.morphology.as_deref().unwrap_or(&args.robot))?;
     let config = ArmNodeConfig {
@@ -77,6 +85,7 @@ pub fn run(args: ArmArgs) -> Result<()> {
         },
         stale_after_s: args.stale_after,
         duplicate_check: std::time::Duration::from_millis(1500),
+        goal_sync_s: args.goal_sync_ms / 1000.0,
         model,
     };
     let shutdown = Arc::new(AtomicBool::new(false));

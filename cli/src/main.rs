@@ -6,9 +6,11 @@ mod bench_learn;
 mod bridge;
 mod engine;
 mod eval;
+mod launch;
 mod report;
 mod sim;
 mod train;
+mod whole_body;
 
 use std::process::ExitCode;
 
@@ -42,6 +44,12 @@ enum Command {
     SimBridge(bridge::BridgeArgs),
     /// Run the arm-module node: the shared low-level skill for one arm module (stop with Ctrl-C).
     Arm(arm::ArmArgs),
+    /// Run the whole-body node: a robot's upper-level policy, sending each arm module's goal and
+    /// each wheel module's velocity (stop with Ctrl-C).
+    WholeBody(whole_body::WholeBodyArgs),
+    /// Bring up a whole robot: the sim bridge, one arm node per arm module and the whole-body
+    /// node, each its own process (stop all with Ctrl-C).
+    Launch(launch::LaunchArgs),
     /// Train policies with PPO.
     Train {
         #[command(subcommand)]
@@ -116,6 +124,8 @@ fn run() -> Result<()> {
         Command::Sim(args) => sim::run(args),
         Command::SimBridge(args) => bridge::run(args),
         Command::Arm(args) => arm::run(args),
+        Command::WholeBody(args) => whole_body::run(args),
+        Command::Launch(args) => launch::run(args),
         Command::Train { what } => train::run(what),
         Command::Eval { what } => eval::run(what),
         Command::Bench { what } => bench::run(what),

@@ -351,6 +351,55 @@ def cmd_reach(args, peer):
             "orientation": [o.w, o.x, o.y, o.z], "frame": ee.header.frame_id}
 
 
+def yaw_of(o):
+    """Heading of a pose's x axis about z [rad]."""
+    return math.atan2(2.0 * (o.w * o.z + o.x * o.y), 1.0 - 2.0 * (o.y * o.y + o.z * o.z))
+
+
+def cmd_target(args, peer):
+    """Sends the robot a target for its tool (--goal x,y,z,yaw in <robot>/odom) through the
+    whole-body node, as a user would; records the tool pose it reports (/<robot>/tool_pose) for
+    --drive-seconds of simulated time. With --disturb, a NaN target and one in a wrong frame go
+    first: both must be refused (and counted) and the real one still reached."""
+    r = args.robot
+    tool_topic = f"/{r}/tool_pose"
+    trajectory = []
+
+    def on_tool(m):
+        p = m.pose.position
+        trajectory.append([stamp(m), p.x, p.y, p.z, yaw_of(m.pose.orientation)])
+
+    peer.create_subscription(PoseStamped, tool_topic, on_tool, DEFAULT)
+    peer.listen(PoseStamped, tool_topic)
+    peer.listen(Clock, "/clock")
+    statuses = latest_diagnostics(peer)
+    target = peer.create_publisher(PoseStamped, f"/{r}/goal_pose", DEFAULT)
+    if not peer.spin_until(lambda: tool_topic in peer.latest and "/clock" in peer.latest
+                           and target.get_subscription_count() > 0, args.timeout):
+        return {"error": "whole-body node or bridge not found"}
+    sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
+    x, y, z, yaw = [float(v) for v in args.goal.split(",")]
+    msg = goal_msg([x, y, z, math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)], args.frame or f"{r}/odom")
+    if args.disturb:
+        bad = goal_msg([float("nan"), y, z, 1.0, 0.0, 0.0, 0.0], f"{r}/odom")
+        target.publish(bad)
+        target.publish(goal_msg([x, y, z, 1.0, 0.0, 0.0, 0.0], "world"))
+        peer.spin_until(lambda: False, 0.5)
+    trajectory.clear()
+    start, wall = sim(), time.monotonic()
+    target.publish(msg)
+    peer.spin_until(lambda: sim() >= start + args.drive_seconds, args.timeout)
+    name = f"kumi whole-body node: {r}"
+    statuses.pop(name, None)
+    peer.spin_until(lambda: name in statuses, 3.0)
+    diagnostics = statuses.get(name, {})
+    end = trajectory[-1] if trajectory else None
+    return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall,
+            "trajectory": trajectory, "diagnostics": diagnostics,
+            "position_error_m": math.dist(end[1:4], [x, y, z]) if end else None,
+            "yaw_error_rad": abs((yaw - end[4] + math.pi) % (2 * math.pi) - math.pi) if end else None}
+
+
 def cmd_flood(args, peer):
     """Issue 10's flood: --count goals as fast as rclpy sends them (random, within 5 cm of
     --goal), then 1 MB payloads on every topic the arm node and the bridge subscribe to (junk
@@ -710,7 +759,7 @@ def main():
             "lockstep": cmd_lockstep, "badinput": cmd_badinput, "latency": cmd_latency,
             "reach": cmd_reach, "armnode": cmd_armnode, "watch": cmd_watch,
             "malformed": cmd_malformed, "zerobyte": cmd_zerobyte, "rosout": cmd_rosout,
-            "flood": cmd_flood,
+            "flood": cmd_flood, "target": cmd_target,
         }[args.command](args, peer)
     finally:
         peer.destroy_node()

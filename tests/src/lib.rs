@@ -242,6 +242,7 @@ impl ArmNode {
             clock: kumi_arm_node::ClockSource::Auto,
             stale_after_s: 0.2,
             duplicate_check: Duration::from_millis(1500),
+            goal_sync_s: 0.0,
         };
         let shutdown = Arc::new(AtomicBool::new(false));
         let flag = shutdown.clone();

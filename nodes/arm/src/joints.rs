@@ -4,22 +4,7 @@
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_policies::observation::JOINTS;
 
-/// Why a joint-state message was not used.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum JointStateRejection {
-    #[error("joint state has {names} names, {positions} positions and {velocities} velocities; the skill needs a position and a velocity for each named joint")]
-    WrongLength {
-        names: usize,
-        positions: usize,
-        velocities: usize,
-    },
-    #[error("joint state lacks joint `{0}`")]
-    MissingJoint(String),
-    #[error("joint state names joint `{0}` twice")]
-    DuplicateJoint(String),
-    #[error("joint state has a non-finite value for `{0}`")]
-    NonFinite(String),
-}
+pub use kumi_ros::joint_state::JointStateRejection;
 
 /// Joint angles [rad] and velocities [rad/s] in the skill's order.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,45 +13,21 @@ pub struct Joints {
     pub qd: [f64; JOINTS],
 }
 
-/// Reads `msg` for the joints named `joints` (unprefixed, as in the skill). Names in the
-/// message may carry the module prefix (`leg1/joint3`, as the sim bridge publishes them) or
-/// not; extra joints are ignored.
+/// Reads `msg` for the joints named `joints` (unprefixed, as in the skill), by the one rule
+/// ([`kumi_ros::joint_state::read_named`]).
 pub fn read(
     msg: &JointState,
     module: &str,
     joints: &[String],
 ) -> Result<Joints, JointStateRejection> {
-    if msg.name.len() != msg.position.len() || msg.name.len() != msg.velocity.len() {
-        return Err(JointStateRejection::WrongLength {
-            names: msg.name.len(),
-            positions: msg.position.len(),
-            velocities: msg.velocity.len(),
-        });
-    }
-    let prefix = format!("{module}/");
-    let mut seen = std::collections::HashSet::with_capacity(msg.name.len());
-    for name in &msg.name {
-        if !seen.insert(name.strip_prefix(prefix.as_str()).unwrap_or(name)) {
-            return Err(JointStateRejection::DuplicateJoint(name.clone()));
-        }
-    }
+    let joints = &joints[..joints.len().min(JOINTS)];
+    let (q, qd) = kumi_ros::joint_state::read_named(msg, module, joints)?;
     let mut out = Joints {
         q: [0.0; JOINTS],
         qd: [0.0; JOINTS],
     };
-    for (i, joint) in joints.iter().enumerate().take(JOINTS) {
-        let k = msg
-            .name
-            .iter()
-            .position(|n| n.strip_prefix(prefix.as_str()).unwrap_or(n) == joint)
-            .ok_or_else(|| JointStateRejection::MissingJoint(joint.clone()))?;
-        let (q, qd) = (msg.position[k], msg.velocity[k]);
-        if !q.is_finite() || !qd.is_finite() {
-            return Err(JointStateRejection::NonFinite(joint.clone()));
-        }
-        out.q[i] = q;
-        out.qd[i] = qd;
-    }
+    out.q[..q.len()].copy_from_slice(&q);
+    out.qd[..qd.len()].copy_from_slice(&qd);
     Ok(out)
 }
 

@@ -18,6 +18,9 @@ pub struct Report {
     pub policy_failures: u64,
     /// Times sim time went back (a restarted simulator) and the node started over.
     pub sim_restarts: u64,
+    /// Ticks acted on with the previous tick's goal after waiting for the tick's own in vain
+    /// (goal sync with a whole-body node).
+    pub late_goals: u64,
     /// The latest step's hold, `None` while the policy runs.
     hold: Option<Hold>,
 }
@@ -61,6 +64,7 @@ impl Report {
             ("stale_holds", self.stale_holds),
             ("policy_failures", self.policy_failures),
             ("sim_restarts", self.sim_restarts),
+            ("late_goals", self.late_goals),
         ];
         DiagnosticStatus {
             level,

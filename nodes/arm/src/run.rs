@@ -29,7 +29,7 @@ use crate::controller::{ArmController, Hold};
 use crate::goal::GoalRules;
 use crate::joints;
 use crate::report::Report;
-use crate::schedule::{Schedule, SimClock};
+use crate::schedule::{GoalSync, Schedule, SimClock, Sync};
 
 /// What the node publishes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,6 +65,10 @@ pub struct ArmNodeConfig {
     pub stale_after_s: f64,
     /// How long to listen for another node already commanding this module before starting.
     pub duplicate_check: Duration,
+    /// In sim time, wait up to this long [s, wall] for the goal stamped with a joint state's
+    /// stamp before acting on that joint state ([`GoalSync`]; 0: act on the latest goal at
+    /// once). Set when a whole-body node sends the goals.
+    pub goal_sync_s: f64,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -265,6 +269,8 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     let mut hold_log = RateLimited::new(Duration::from_secs(2));
     let mut goal_log = RateLimited::new(Duration::from_secs(1));
     let mut latest_stamp = Time::default();
+    let mut goal_sync = GoalSync::new(config.goal_sync_s);
+    let mut goal_stamp: Option<f64> = None;
     let mut report = Report::default();
     let mut report_at = Instant::now();
 
@@ -333,6 +339,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                                 p.x, p.y, p.z
                             ),
                         }
+                        goal_stamp = Some(msg.header.stamp.seconds());
                         prepared.controller.set_goal(goal);
                     }
                     Err(why) => {
@@ -395,6 +402,23 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         };
 
         let measured_at = prepared.controller.joints().map(|(_, t)| *t);
+        if config.goal_sync_s > 0.0 && sim && schedule.fresh() {
+            if let Some(t) = measured_at {
+                match goal_sync.check(t, goal_stamp, wall_now) {
+                    Sync::Wait => {
+                        std::thread::sleep(Duration::from_micros(100));
+                        continue;
+                    }
+                    Sync::Late => {
+                        report.late_goals += 1;
+                        if log.check(Instant::now()).is_some() {
+                            warn!("{module}: no goal for the tick at {t:.3} s within {:.3} s; acting on the previous one", config.goal_sync_s);
+                        }
+                    }
+                    Sync::Ready => {}
+                }
+            }
+        }
         if schedule.due(now, measured_at) {
             let cmd = prepared.controller.step(now);
             report.step(cmd.hold.as_ref());

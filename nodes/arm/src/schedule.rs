@@ -48,6 +48,11 @@ impl Schedule {
         self.sim
     }
 
+    /// A joint state newer than the last one acted on has arrived.
+    pub fn fresh(&self) -> bool {
+        self.fresh
+    }
+
     /// A joint state measured at `t` [s] (in the current time base) arrived.
     pub fn joint_state(&mut self, t: f64) {
         self.fresh |= t > self.last_acted_stamp;
@@ -71,6 +76,66 @@ impl Schedule {
             self.fresh = false;
         }
         due
+    }
+}
+
+/// Goal synchronisation with a whole-body node. It stamps each goal with the stamp of the
+/// state it chose the goal from, so the arm node can act on a tick's joint states with the goal
+/// of the same tick, as the skill did in training, instead of the previous tick's. Waiting is
+/// bounded: after `wait_s` [s, wall] the node acts on the goal it has.
+#[derive(Debug, Clone)]
+pub struct GoalSync {
+    wait_s: f64,
+    /// The joint stamp being waited on and since when [s, wall].
+    waiting: Option<(f64, f64)>,
+}
+
+/// What [`GoalSync::check`] decided.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sync {
+    /// The goal is of this tick (or newer), or there is no goal to wait for: act.
+    Ready,
+    /// Wait for this tick's goal.
+    Wait,
+    /// Waited `wait_s` in vain: act on the goal there is.
+    Late,
+}
+
+impl GoalSync {
+    pub fn new(wait_s: f64) -> Self {
+        Self {
+            wait_s,
+            waiting: None,
+        }
+    }
+
+    /// Whether to act on the joint state stamped `joint_stamp_s` [s] with the goal stamped
+    /// `goal_stamp_s` (`None`: no goal yet, nothing to wait for), at `wall_s` [s].
+    pub fn check(&mut self, joint_stamp_s: f64, goal_stamp_s: Option<f64>, wall_s: f64) -> Sync {
+        let behind = goal_stamp_s.is_some_and(|g| g < joint_stamp_s);
+        if !behind {
+            self.waiting = None;
+            return Sync::Ready;
+        }
+        match self.waiting {
+            Some((stamp, since)) if stamp == joint_stamp_s => {
+                if wall_s - since >= self.wait_s {
+                    self.waiting = None;
+                    Sync::Late
+                } else {
+                    Sync::Wait
+                }
+            }
+            _ => {
+                self.waiting = Some((joint_stamp_s, wall_s));
+                if self.wait_s <= 0.0 {
+                    self.waiting = None;
+                    Sync::Late
+                } else {
+                    Sync::Wait
+                }
+            }
+        }
     }
 }
 
@@ -131,6 +196,25 @@ mod tests {
         // No joint states, but the clock runs on: act once per period (to hold).
         assert!(!s.due(0.05, Some(1.0 / 30.0)));
         assert!(s.due(2.0 / 30.0, Some(1.0 / 30.0)));
+    }
+
+    #[test]
+    fn goal_sync_waits_for_the_goal_of_the_same_tick_but_not_forever() {
+        let mut g = GoalSync::new(0.1);
+        assert_eq!(
+            g.check(1.0, None, 0.0),
+            Sync::Ready,
+            "no goal: nothing to wait for"
+        );
+        assert_eq!(g.check(1.0, Some(1.0), 0.0), Sync::Ready);
+        assert_eq!(g.check(2.0, Some(1.0), 0.0), Sync::Wait);
+        assert_eq!(g.check(2.0, Some(1.0), 0.05), Sync::Wait);
+        assert_eq!(g.check(2.0, Some(2.0), 0.06), Sync::Ready);
+        assert_eq!(g.check(3.0, Some(2.0), 1.0), Sync::Wait);
+        assert_eq!(g.check(3.0, Some(2.0), 1.1), Sync::Late);
+        // A new tick starts its own wait.
+        assert_eq!(g.check(4.0, Some(2.0), 1.15), Sync::Wait);
+        assert_eq!(GoalSync::new(0.0).check(4.0, Some(2.0), 0.0), Sync::Late);
     }
 
     #[test]

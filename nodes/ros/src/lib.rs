@@ -9,6 +9,7 @@
 //! - [`topics`] is the one place topic names are built.
 
 pub mod geometry;
+pub mod joint_state;
 pub mod qos;
 pub mod rosout;
 pub mod strict;

@@ -78,3 +78,15 @@ pub fn frame(robot: &str, link: &str) -> String {
 pub fn odom_frame(robot: &str) -> String {
     format!("{robot}/odom")
 }
+
+/// `/<robot>/goal_pose`: `geometry_msgs/PoseStamped`, the target for the manipulator's tool in
+/// `<robot>/odom` (position and heading), taken by the whole-body node.
+pub fn robot_goal_pose(robot: &str) -> String {
+    format!("/{robot}/goal_pose")
+}
+
+/// `/<robot>/tool_pose`: `geometry_msgs/PoseStamped`, the manipulator's tool in `<robot>/odom`
+/// as the whole-body node computes it from each tick's state.
+pub fn tool_pose(robot: &str) -> String {
+    format!("/{robot}/tool_pose")
+}

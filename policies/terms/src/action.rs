@@ -45,6 +45,62 @@ impl GoalBounds {
     }
 }
 
+impl GoalBounds {
+    /// The bounds a policy was trained with, read back from its action description
+    /// ([`ActionTerms::describe`], the `kumi.action` metadata): a deployed node takes them from
+    /// the policy file, not from a training config. Bounds of a role the robot lacks are 0. The
+    /// caller still checks the whole contract: terms built from these bounds must describe
+    /// themselves exactly as the file does.
+    pub fn from_description(description: &str) -> Result<Self, TermError> {
+        let bad = |why: String| TermError::Description(why);
+        let mut bounds = GoalBounds {
+            manipulator_position_m: 0.0,
+            manipulator_rotation_rad: 0.0,
+            leg_position_m: 0.0,
+            leg_roll_rad: 0.0,
+        };
+        let mut seen: Vec<(&str, f64, f64)> = Vec::new();
+        for entry in description.split(';').filter(|e| !e.is_empty()) {
+            let fields: Vec<&str> = entry.split(':').collect();
+            let role = *fields
+                .get(1)
+                .ok_or_else(|| bad(format!("`{entry}` names no role")))?;
+            if role == "wheel" {
+                continue;
+            }
+            let value = |i: usize, key: &str| -> Result<f64, TermError> {
+                fields
+                    .get(i)
+                    .and_then(|f| f.strip_prefix(key))
+                    .and_then(|v| v.strip_prefix('='))
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .ok_or_else(|| bad(format!("`{entry}`: no number `{key}=` in field {i}")))
+            };
+            let position = value(3, "position_m")?;
+            let rotation = match role {
+                "manipulator" => value(4, "rotation_rad")?,
+                "leg" => value(4, "roll_rad")?,
+                other => return Err(bad(format!("`{entry}`: unknown role `{other}`"))),
+            };
+            if let Some((_, p, r)) = seen.iter().find(|(r, _, _)| *r == role) {
+                if (*p, *r) != (position, rotation) {
+                    return Err(bad(format!("two {role} modules with different bounds")));
+                }
+            }
+            seen.push((role, position, rotation));
+            if role == "manipulator" {
+                bounds.manipulator_position_m = position;
+                bounds.manipulator_rotation_rad = rotation;
+            } else {
+                bounds.leg_position_m = position;
+                bounds.leg_roll_rad = rotation;
+            }
+        }
+        bounds.check()?;
+        Ok(bounds)
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TermError {
     #[error("goal bound `{name}` must be finite and >= 0, not {value}")]
@@ -55,6 +111,8 @@ pub enum TermError {
     Size { expected: usize, found: usize },
     #[error("robot `{0}` has no arm or wheel module: nothing for a whole-body policy to command")]
     Empty(String),
+    #[error("action description: {0}")]
+    Description(String),
 }
 
 /// Clips to [-1, 1]; a non-finite value becomes 0 (hold the home goal, stop the wheel).

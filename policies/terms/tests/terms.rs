@@ -155,3 +155,35 @@ fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
         })
     );
 }
+
+#[test]
+fn bounds_read_back_from_the_action_description() {
+    let bounds = GoalBounds {
+        manipulator_position_m: 0.25,
+        manipulator_rotation_rad: 0.5,
+        leg_position_m: 0.1,
+        leg_roll_rad: 0.3,
+    };
+    for name in ["minimal", "dragon", "tricycle"] {
+        let model = robot(name);
+        let terms = ActionTerms::new(&model, &bounds).unwrap();
+        let back = GoalBounds::from_description(&terms.describe()).unwrap();
+        let again = ActionTerms::new(&model, &back).unwrap();
+        assert_eq!(again.describe(), terms.describe(), "{name}");
+    }
+    // Minimal has no leg: its leg bounds read back as 0.
+    let minimal = ActionTerms::new(&robot("minimal"), &bounds).unwrap();
+    let back = GoalBounds::from_description(&minimal.describe()).unwrap();
+    assert_eq!(back.leg_position_m, 0.0);
+    assert_eq!(back.manipulator_rotation_rad, 0.5);
+    for bad in [
+        "arm0",
+        "arm0:manipulator:6:position_m=x:rotation_rad=0.5",
+        "arm0:manipulator:6:position_m=0.2",
+        "arm0:gripper:6:position_m=0.2:rotation_rad=0.5",
+        "leg0:leg:4:position_m=0.1:roll_rad=0.5;leg1:leg:4:position_m=0.2:roll_rad=0.5",
+        "arm0:manipulator:6:position_m=-1:rotation_rad=0.5",
+    ] {
+        assert!(GoalBounds::from_description(bad).is_err(), "{bad}");
+    }
+}

@@ -1,0 +1,360 @@
+//! `kumi launch`: a whole robot from its morphology file. The sim bridge, one arm node per arm
+//! module and the whole-body node, each its own process and its own ROS 2 node, started from
+//! the equivalent `kumi` commands (printed, so that any of them can be run by hand or on
+//! another host instead).
+//!
+//! **Supervision.** One Ctrl-C (or SIGTERM) stops every node and waits for them. A node that
+//! exits on its own stops the whole launch, with its name and exit status, and the launch
+//! exits non-zero: a robot missing a node is not the robot that was launched, and a restart
+//! loop would hide the cause. The nodes themselves survive a peer's restart, so a node can be
+//! restarted by hand (`--without` leaves one out to start it elsewhere).
+
+use std::io::{BufRead, BufReader};
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use kumi_model::RobotModel;
+use kumi_policies::observation::JOINTS;
+
+use crate::sim::load_model;
+
+#[derive(Args, Debug, Clone)]
+pub struct LaunchArgs {
+    /// `minimal`, `dragon`, `tricycle`, or a path to a morphology file.
+    pub morphology: String,
+    /// Robot name, the namespace of every topic (default: the morphology's name).
+    #[arg(long)]
+    pub robot: Option<String>,
+    /// The bridge steps only when every node has answered the tick (reproducible, as fast as
+    /// the nodes allow); without it, real time.
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Physics engine of the sim bridge: rapier (default) or mujoco.
+    #[arg(long)]
+    pub engine: Option<String>,
+    /// Leave this arm module's node out (repeatable), to start it by hand or on another host.
+    #[arg(long = "without", value_name = "MODULE")]
+    pub without: Vec<String>,
+    /// No whole-body node: arm goals come from elsewhere (`ros2 topic pub`).
+    #[arg(long)]
+    pub no_whole_body: bool,
+    /// The whole-body policy (default: the shipped policies/<morphology>_whole_body.onnx).
+    #[arg(long)]
+    pub policy: Option<PathBuf>,
+    /// The skill every arm node runs (default: the shipped policies/arm_reach.onnx).
+    #[arg(long)]
+    pub skill: Option<PathBuf>,
+}
+
+/// One node of a launch: a name for its log lines and the `kumi` arguments that start it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Planned {
+    pub name: String,
+    pub args: Vec<String>,
+}
+
+/// How long an arm node waits for the goal of the current tick [ms] (`kumi arm
+/// --goal-sync-ms`): in lockstep long enough for any tick on a loaded machine, but under the
+/// bridge's 0.5 s lockstep timeout; in real time a third of a control period.
+fn goal_sync_ms(lockstep: bool) -> &'static str {
+    if lockstep {
+        "250"
+    } else {
+        "10"
+    }
+}
+
+/// The nodes to start for `model`, in start order. Pure.
+pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
+    let robot = args.robot.clone().unwrap_or_else(|| model.name.clone());
+    let arms: Vec<&str> = model
+        .modules
+        .iter()
+        .filter(|m| m.ee_link.is_some() && m.position_joints().count() == JOINTS)
+        .map(|m| m.name.as_str())
+        .collect();
+    for w in &args.without {
+        if !arms.contains(&w.as_str()) {
+            bail!(
+                "--without {w}: robot `{}` has no arm module `{w}` (its arm modules: {})",
+                model.name,
+                arms.join(", ")
+            );
+        }
+    }
+    let s = |v: &str| v.to_string();
+    let mut bridge = vec![
+        s("sim-bridge"),
+        args.morphology.clone(),
+        s("--robot"),
+        robot.clone(),
+    ];
+    if args.lockstep {
+        bridge.push(s("--lockstep"));
+    }
+    if let Some(e) = &args.engine {
+        bridge.extend([s("--engine"), e.clone()]);
+    }
+    let mut nodes = vec![Planned {
+        name: s("sim_bridge"),
+        args: bridge,
+    }];
+    for arm in arms
+        .iter()
+        .filter(|a| !args.without.iter().any(|w| w == *a))
+    {
+        let mut a = vec![
+            s("arm"),
+            s(arm),
+            s("--robot"),
+            robot.clone(),
+            s("--morphology"),
+            args.morphology.clone(),
+        ];
+        if let Some(p) = &args.skill {
+            a.extend([s("--policy"), p.display().to_string()]);
+        }
+        if !args.no_whole_body {
+            a.extend([s("--goal-sync-ms"), s(goal_sync_ms(args.lockstep))]);
+        }
+        nodes.push(Planned {
+            name: s(arm),
+            args: a,
+        });
+    }
+    if !args.no_whole_body {
+        let mut a = vec![
+            s("whole-body"),
+            s("--robot"),
+            robot.clone(),
+            s("--morphology"),
+            args.morphology.clone(),
+        ];
+        if let Some(p) = &args.policy {
+            a.extend([s("--policy"), p.display().to_string()]);
+        }
+        if let Some(p) = &args.skill {
+            a.extend([s("--skill"), p.display().to_string()]);
+        }
+        nodes.push(Planned {
+            name: s("whole_body"),
+            args: a,
+        });
+    }
+    Ok(nodes)
+}
+
+/// A command line as a shell would take it (arguments with spaces quoted).
+fn shell_line(args: &[String]) -> String {
+    let quote = |a: &String| {
+        if a.is_empty() || a.contains(|c: char| c.is_whitespace() || c == '\'') {
+            format!("'{}'", a.replace('\'', "'\\''"))
+        } else {
+            a.clone()
+        }
+    };
+    std::iter::once("kumi".to_string())
+        .chain(args.iter().map(quote))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Running nodes.
+pub struct Launch {
+    children: Vec<(String, Child)>,
+}
+
+impl Launch {
+    /// Starts every planned node as a child process of this executable, its output prefixed
+    /// with its name on this process's stderr.
+    pub fn start(nodes: &[Planned]) -> Result<Self> {
+        let exe = std::env::current_exe().context("finding the kumi executable")?;
+        let mut launch = Launch {
+            children: Vec::new(),
+        };
+        for node in nodes {
+            let mut child = Command::new(&exe)
+                .args(&node.args)
+                .stdin(Stdio::null())
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .with_context(|| format!("starting `{}`", shell_line(&node.args)))?;
+            for stream in [
+                child
+                    .stdout
+                    .take()
+                    .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+                child
+                    .stderr
+                    .take()
+                    .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+            ]
+            .into_iter()
+            .flatten()
+            {
+                let name = node.name.clone();
+                std::thread::spawn(move || {
+                    for line in BufReader::new(stream).lines().map_while(|l| l.ok()) {
+                        eprintln!("[{name}] {line}");
+                    }
+                });
+            }
+            launch.children.push((node.name.clone(), child));
+        }
+        Ok(launch)
+    }
+
+    /// The first node that has exited, with how.
+    pub fn exited(&mut self) -> Option<(String, std::process::ExitStatus)> {
+        self.children.iter_mut().find_map(|(name, child)| {
+            child
+                .try_wait()
+                .ok()
+                .flatten()
+                .map(|status| (name.clone(), status))
+        })
+    }
+
+    /// Stops every node: SIGINT, then SIGKILL for any still running after `grace`.
+    pub fn stop(&mut self, grace: Duration) {
+        for (_, child) in &mut self.children {
+            if matches!(child.try_wait(), Ok(None)) {
+                let _ = Command::new("kill")
+                    .args(["-INT", &child.id().to_string()])
+                    .status();
+            }
+        }
+        let deadline = Instant::now() + grace;
+        for (name, child) in &mut self.children {
+            while matches!(child.try_wait(), Ok(None)) && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if matches!(child.try_wait(), Ok(None)) {
+                eprintln!("launch: {name} did not stop within {grace:?}; killing it");
+                let _ = child.kill();
+                let _ = child.wait();
+            }
+        }
+    }
+}
+
+impl Drop for Launch {
+    fn drop(&mut self) {
+        self.stop(Duration::from_secs(5));
+    }
+}
+
+pub fn run(args: LaunchArgs) -> Result<()> {
+    let model = load_model(&args.morphology)?;
+    let nodes = plan(&model, &args)?;
+    if !args.no_whole_body {
+        let policy = args
+            .policy
+            .clone()
+            .unwrap_or_else(|| kumi_runtime::shipped_whole_body_policy(&model.name));
+        if !policy.exists() {
+            bail!(
+                "no whole-body policy for `{}` at {}: train one (`kumi train whole-body {}`) and pass --policy, or launch with --no-whole-body",
+                model.name,
+                policy.display(),
+                args.morphology
+            );
+        }
+    }
+    let domain = std::env::var("ROS_DOMAIN_ID").unwrap_or_else(|_| "0".into());
+    eprintln!(
+        "launching `{}` on ROS domain {domain}: {} nodes. The same by hand, each in its own terminal:",
+        model.name,
+        nodes.len()
+    );
+    for node in &nodes {
+        eprintln!("  {}", shell_line(&node.args));
+    }
+    let shutdown = Arc::new(AtomicBool::new(false));
+    let flag = shutdown.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    let mut launch = Launch::start(&nodes)?;
+    let result = loop {
+        if shutdown.load(Ordering::Relaxed) {
+            eprintln!("launch: stopping every node");
+            break Ok(());
+        }
+        if let Some((name, status)) = launch.exited() {
+            eprintln!("launch: node `{name}` exited ({status}); stopping the others");
+            break Err(anyhow::anyhow!(
+                "node `{name}` exited ({status}); the launch stopped"
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    launch.stop(Duration::from_secs(5));
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(morphology: &str) -> LaunchArgs {
+        LaunchArgs {
+            morphology: morphology.into(),
+            robot: None,
+            lockstep: true,
+            engine: None,
+            without: Vec::new(),
+            no_whole_body: false,
+            policy: None,
+            skill: None,
+        }
+    }
+
+    #[test]
+    fn one_node_per_arm_module_plus_the_bridge_and_the_whole_body_node() {
+        let model = load_model("tricycle").unwrap();
+        let nodes = plan(&model, &args("tricycle")).unwrap();
+        let names: Vec<&str> = nodes.iter().map(|n| n.name.as_str()).collect();
+        let arms = model.modules.iter().filter(|m| m.ee_link.is_some()).count();
+        assert_eq!(names.len(), arms + 2, "{names:?}");
+        assert_eq!(names[0], "sim_bridge");
+        assert_eq!(*names.last().unwrap(), "whole_body");
+        assert_eq!(
+            shell_line(&nodes[0].args),
+            "kumi sim-bridge tricycle --robot tricycle --lockstep"
+        );
+        assert!(nodes[1]
+            .args
+            .ends_with(&["--goal-sync-ms".into(), "250".into()]));
+
+        let mut without = args("tricycle");
+        let left_out = nodes[1].name.clone();
+        without.without = vec![left_out.clone()];
+        without.robot = Some("second".into());
+        without.no_whole_body = true;
+        let fewer = plan(&model, &without).unwrap();
+        assert_eq!(fewer.len(), arms);
+        assert!(fewer
+            .iter()
+            .all(|n| n.name != left_out && n.args.contains(&"second".to_string())));
+        assert!(fewer
+            .iter()
+            .all(|n| !n.args.contains(&"--goal-sync-ms".to_string())));
+
+        let mut unknown = args("tricycle");
+        unknown.without = vec!["tail".into()];
+        let err = plan(&model, &unknown).unwrap_err().to_string();
+        assert!(err.contains("no arm module `tail`"), "{err}");
+    }
+
+    #[test]
+    fn command_lines_quote_what_a_shell_would_split() {
+        let line = shell_line(&["arm".into(), "my file.onnx".into(), "it's".into()]);
+        assert_eq!(line, "kumi arm 'my file.onnx' 'it'\\''s'");
+    }
+}

@@ -1,0 +1,70 @@
+//! `kumi whole-body`: the whole-body node, running a robot's upper-level policy.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use kumi_runtime::BackendChoice;
+use kumi_whole_body_node::WholeBodyNodeConfig;
+
+use crate::sim::load_model;
+
+#[derive(Args, Debug)]
+pub struct WholeBodyArgs {
+    /// Robot name, the namespace of every topic (`/<robot>/...`), as given to the sim bridge.
+    #[arg(long)]
+    pub robot: String,
+    /// The robot's morphology: `minimal`, `dragon`, `tricycle`, or a morphology file
+    /// (default: the robot name).
+    #[arg(long)]
+    pub morphology: Option<String>,
+    /// The whole-body ONNX policy (default: the shipped policies/<morphology>_whole_body.onnx).
+    #[arg(long)]
+    pub policy: Option<PathBuf>,
+    /// The skill the arm nodes run (default: the shipped policies/arm_reach.onnx); the policy
+    /// must have been trained over it.
+    #[arg(long)]
+    pub skill: Option<PathBuf>,
+    /// Inference backend: auto (ONNX Runtime when ORT_DYLIB_PATH is set, else tract),
+    /// onnxruntime or tract.
+    #[arg(long, default_value = "auto")]
+    pub backend: BackendChoice,
+    /// Inputs older than this [s] make the node hold (wheels stop, arms keep their goals).
+    #[arg(long, default_value_t = 0.5)]
+    pub stale_after: f64,
+    /// Targets further than this [m] from the base (horizontally) are refused: the policies are
+    /// trained on targets within 3 m of the origin, the robot starting within 0.5 m of it.
+    #[arg(long, default_value_t = 4.5)]
+    pub max_target_distance: f64,
+}
+
+pub fn run(args: WholeBodyArgs) -> Result<()> {
+    if !(args.stale_after.is_finite() && args.stale_after > 0.0) {
+        bail!("--stale-after must be a positive number of seconds");
+    }
+    if !(args.max_target_distance.is_finite() && args.max_target_distance > 0.0) {
+        bail!("--max-target-distance must be a positive number of metres");
+    }
+    let model = load_model(args.morphology.as_deref().unwrap_or(&args.robot))?;
+    let config = WholeBodyNodeConfig {
+        policy: args
+            .policy
+            .unwrap_or_else(|| kumi_runtime::shipped_whole_body_policy(&model.name)),
+        skill: args.skill.unwrap_or_else(kumi_runtime::shipped_arm_policy),
+        robot: args.robot,
+        backend: args.backend,
+        domain_id: kumi_ros::domain_id_from_env()?,
+        stale_after_s: args.stale_after,
+        max_target_distance_m: args.max_target_distance,
+        duplicate_check: std::time::Duration::from_millis(1500),
+        model,
+    };
+    let shutdown = Arc::new(AtomicBool::new(false));
+    let flag = shutdown.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    kumi_whole_body_node::run(config, shutdown)?;
+    Ok(())
+}

@@ -1,0 +1,123 @@
+//! What the whole-body node reports on `/diagnostics`: what it is doing (driving to the
+//! target, or holding and why) and counters of everything it refused. Pure.
+
+use kumi_msgs::diagnostic_msgs::{DiagnosticStatus, KeyValue};
+
+use crate::controller::Hold;
+
+/// Counters and the latest state of one whole-body node.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Report {
+    pub targets_accepted: u64,
+    pub targets_rejected: u64,
+    pub joint_states_rejected: u64,
+    pub odometry_rejected: u64,
+    /// Messages that could not be decoded at all.
+    pub malformed: u64,
+    /// Times the node started holding because an input went stale.
+    pub stale_holds: u64,
+    pub policy_failures: u64,
+    /// Times sim time went back (a restarted simulator) and the node started over.
+    pub sim_restarts: u64,
+    /// Decisions made on a complete tick (every input with the same stamp).
+    pub synchronous_ticks: u64,
+    /// Decisions made on the latest of each input after waiting for the rest of a tick.
+    pub unsynchronised_ticks: u64,
+    /// The latest tool position error [m] and absolute yaw error [rad], with a target.
+    pub errors: Option<(f64, f64)>,
+    hold: Option<Hold>,
+}
+
+impl Report {
+    /// Records one decision's hold; counts a stale hold when it begins.
+    pub fn step(&mut self, hold: Option<&Hold>) {
+        let was_stale = matches!(self.hold, Some(Hold::Stale { .. }));
+        match hold {
+            Some(Hold::Stale { .. }) if !was_stale => self.stale_holds += 1,
+            Some(Hold::PolicyFailed(_)) => self.policy_failures += 1,
+            _ => {}
+        }
+        self.hold = hold.cloned();
+    }
+
+    /// The node's `DiagnosticStatus`, named `kumi whole-body node: <robot>`. WARN while it
+    /// holds for a reason other than having no target yet.
+    pub fn status(&self, robot: &str) -> DiagnosticStatus {
+        let (level, message) = match &self.hold {
+            None => (
+                DiagnosticStatus::OK,
+                "driving the tool to the target".into(),
+            ),
+            Some(Hold::NoTarget) => (DiagnosticStatus::OK, "holding: no target yet".into()),
+            Some(Hold::Stale { input, age_s }) => (
+                DiagnosticStatus::WARN,
+                format!("holding: {input} are {age_s:.2} s old"),
+            ),
+            Some(Hold::PolicyFailed(e)) => (
+                DiagnosticStatus::ERROR,
+                format!("holding: policy failed: {e}"),
+            ),
+        };
+        let mut values: Vec<(&str, String)> = [
+            ("targets_accepted", self.targets_accepted),
+            ("targets_rejected", self.targets_rejected),
+            ("joint_states_rejected", self.joint_states_rejected),
+            ("odometry_rejected", self.odometry_rejected),
+            ("rejected_malformed", self.malformed),
+            ("stale_holds", self.stale_holds),
+            ("policy_failures", self.policy_failures),
+            ("sim_restarts", self.sim_restarts),
+            ("synchronous_ticks", self.synchronous_ticks),
+            ("unsynchronised_ticks", self.unsynchronised_ticks),
+        ]
+        .iter()
+        .map(|(k, v)| (*k, v.to_string()))
+        .collect();
+        if let Some((p, y)) = self.errors {
+            values.push(("position_error_m", format!("{p:.4}")));
+            values.push(("yaw_error_rad", format!("{y:.4}")));
+        }
+        DiagnosticStatus {
+            level,
+            name: format!("kumi whole-body node: {robot}"),
+            message,
+            hardware_id: robot.to_string(),
+            values: values
+                .into_iter()
+                .map(|(key, value)| KeyValue {
+                    key: key.to_string(),
+                    value,
+                })
+                .collect(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn says_why_it_holds_and_counts_stale_holds_once() {
+        let mut r = Report::default();
+        r.step(Some(&Hold::NoTarget));
+        assert_eq!(r.status("t").message, "holding: no target yet");
+        let stale = Hold::Stale {
+            input: "odometry messages".into(),
+            age_s: 0.7,
+        };
+        r.step(Some(&stale));
+        r.step(Some(&stale));
+        let s = r.status("t");
+        assert_eq!(s.level, DiagnosticStatus::WARN);
+        assert_eq!(s.message, "holding: odometry messages are 0.70 s old");
+        assert_eq!(r.stale_holds, 1);
+        r.errors = Some((0.1, 0.2));
+        r.step(None);
+        let s = r.status("t");
+        assert!(s
+            .values
+            .iter()
+            .any(|kv| kv.key == "position_error_m" && kv.value == "0.1000"));
+    }
+}

@@ -1,0 +1,446 @@
+//! The ROS 2 shell of the whole-body node: the target, odometry and joint states in,
+//! [`WholeBodyController`] in the middle, each arm module's goal and each wheel module's
+//! velocity out.
+//!
+//! **Timing.** The node decides once per tick, on the tick's complete state ([`Tick`]), and
+//! stamps every goal with that tick's stamp. Arm nodes started with a goal wait (`kumi arm
+//! --goal-sync`) act on a tick's joint states only with the goal computed from the same tick,
+//! so in lockstep the skill acts on the goal the upper policy chose from the same state, as in
+//! training.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use kumi_model::RobotModel;
+use kumi_msgs::builtin_interfaces::Time;
+use kumi_msgs::diagnostic_msgs::DiagnosticArray;
+use kumi_msgs::geometry_msgs::PoseStamped;
+use kumi_msgs::nav_msgs::Odometry;
+use kumi_msgs::sensor_msgs::JointState;
+use kumi_msgs::std_msgs::{Float64, Header};
+use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
+use kumi_runtime::{BackendChoice, ModelFile, RuntimeError, WholeBodyPolicy};
+use kumi_terms::{ActionTerms, GoalBounds};
+use nalgebra::Vector3;
+use ros2_client::Publisher;
+use tracing::{info, warn};
+
+use crate::controller::{Decision, Hold, WholeBodyController};
+use crate::report::Report;
+use crate::target;
+use crate::tick::{BaseState, Due, ModuleState, Tick};
+
+#[derive(Debug, Clone)]
+pub struct WholeBodyNodeConfig {
+    pub model: Arc<RobotModel>,
+    /// The robot's namespace (`/<robot>/...`).
+    pub robot: String,
+    /// The whole-body policy (ONNX with its contract).
+    pub policy: PathBuf,
+    /// The skill the arm nodes run: the policy must have been trained over it.
+    pub skill: PathBuf,
+    pub backend: BackendChoice,
+    pub domain_id: u16,
+    /// Inputs older than this [s, wall] make the node hold.
+    pub stale_after_s: f64,
+    /// Targets further than this [m] from the base (horizontally) are refused.
+    pub max_target_distance_m: f64,
+    /// How long to listen for another whole-body node of the same robot before starting.
+    pub duplicate_check: Duration,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum WholeBodyNodeError {
+    #[error("reading {path}: {error}")]
+    Read { path: String, error: std::io::Error },
+    #[error("{path}: {message}")]
+    Policy { path: String, message: String },
+    #[error(transparent)]
+    Runtime(#[from] RuntimeError),
+    #[error(transparent)]
+    Ros(#[from] RosError),
+    #[error("robot `{robot}`: {message}")]
+    Robot { robot: String, message: String },
+    #[error("another whole-body node already drives robot `{robot}` (it publishes {topic}); stop it first, or give this robot another name with --robot")]
+    Duplicate { robot: String, topic: String },
+}
+
+/// Loads the policy and checks it against the robot and the skill: the goal bounds come from
+/// the policy's own action description, and the whole contract must match.
+pub fn prepare(config: &WholeBodyNodeConfig) -> Result<WholeBodyController, WholeBodyNodeError> {
+    let read = |path: &PathBuf| {
+        std::fs::read(path).map_err(|error| WholeBodyNodeError::Read {
+            path: path.display().to_string(),
+            error,
+        })
+    };
+    let skill = read(&config.skill)?;
+    let bytes = read(&config.policy)?;
+    let label = config.policy.display().to_string();
+    let policy_error = |message: String| WholeBodyNodeError::Policy {
+        path: label.clone(),
+        message,
+    };
+    let file = ModelFile::decode(bytes.clone())
+        .map_err(|e| policy_error(format!("not an ONNX model: {e}")))?;
+    let description = file
+        .metadata
+        .get(kumi_terms::contract::ACTION)
+        .ok_or_else(|| {
+            policy_error(format!(
+                "metadata `{}` is missing: not a kumi whole-body policy",
+                kumi_terms::contract::ACTION
+            ))
+        })?;
+    let bounds =
+        GoalBounds::from_description(description).map_err(|e| policy_error(e.to_string()))?;
+    let robot_error = |message: String| WholeBodyNodeError::Robot {
+        robot: config.model.name.clone(),
+        message,
+    };
+    let terms = ActionTerms::new(&config.model, &bounds).map_err(|e| robot_error(e.to_string()))?;
+    let expected = kumi_terms::contract::contract(
+        &config.model,
+        &terms,
+        &skill,
+        kumi_model::commands::CONTROL_HZ,
+    );
+    let mut policy = WholeBodyPolicy::from_bytes(bytes, &label, &expected, config.backend)?;
+    info!(
+        "whole-body policy {} ({} backend) over skill {}",
+        label,
+        policy.backend(),
+        config.skill.display()
+    );
+    WholeBodyController::new(
+        &config.model,
+        terms,
+        Box::new(move |obs| policy.act(obs).map_err(|e| e.to_string())),
+    )
+    .map_err(robot_error)
+}
+
+struct Io {
+    target: StrictSubscription<PoseStamped>,
+    odom: StrictSubscription<Odometry>,
+    joint_states: Vec<StrictSubscription<JointState>>,
+    goals: Vec<(String, String, Publisher<PoseStamped>)>,
+    wheels: Vec<(String, Publisher<Float64>)>,
+    tool_pose: Publisher<PoseStamped>,
+    diagnostics: Publisher<DiagnosticArray>,
+}
+
+/// Messages taken per subscription per loop: a flood cannot keep the node from acting.
+const MAX_TAKEN: usize = 1000;
+
+fn open_io(
+    node: &mut RosNode,
+    config: &WholeBodyNodeConfig,
+    controller: &WholeBodyController,
+) -> Result<Io, WholeBodyNodeError> {
+    let robot = config.robot.as_str();
+    let mut joint_states = Vec::new();
+    for module in controller.modules() {
+        joint_states
+            .push(node.strict_subscription(&topics::joint_states(robot, module), qos::default())?);
+    }
+    let mut goals = Vec::new();
+    for arm in controller.terms().arms() {
+        let root = &config
+            .model
+            .module(&arm.module)
+            .expect("terms come from the model")
+            .root_link;
+        goals.push((
+            arm.module.clone(),
+            topics::frame(robot, root),
+            node.publisher(&topics::goal_pose(robot, &arm.module), qos::default())?,
+        ));
+    }
+    let mut wheels = Vec::new();
+    for wheel in controller.terms().wheels() {
+        wheels.push((
+            wheel.module.clone(),
+            node.publisher(
+                &topics::wheel_velocity(robot, &wheel.module),
+                qos::default(),
+            )?,
+        ));
+    }
+    Ok(Io {
+        target: node.strict_subscription(&topics::robot_goal_pose(robot), qos::default())?,
+        odom: node.strict_subscription(&topics::odom(robot), qos::default())?,
+        joint_states,
+        goals,
+        wheels,
+        tool_pose: node.publisher(&topics::tool_pose(robot), qos::default())?,
+        diagnostics: node.publisher(topics::DIAGNOSTICS, qos::default())?,
+    })
+}
+
+/// The base state of an odometry message: pose in its frame, twist turned from the child
+/// (base) frame into it. `None` when a value is not finite or the quaternion is zero.
+pub fn base_state(msg: &Odometry) -> Option<BaseState> {
+    let pose_w = geometry::isometry(&msg.pose.pose)?;
+    let v = msg.twist.twist.linear;
+    let v_b = Vector3::new(v.x, v.y, v.z);
+    if !v_b.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    Some(BaseState {
+        pose_w,
+        linear_velocity_w: pose_w.rotation * v_b,
+    })
+}
+
+/// Publishes a decision: wheel velocities first, then the goals stamped with the tick.
+fn publish(io: &Io, decision: &Decision, stamp: Time, odom_frame: &str) {
+    for ((_, publisher), (_, v)) in io.wheels.iter().zip(&decision.wheel_velocities) {
+        let _ = publisher.publish(Float64 { data: *v });
+    }
+    if let Some(goals) = &decision.goals {
+        for ((_, frame, publisher), (_, goal)) in io.goals.iter().zip(goals) {
+            let pose = nalgebra::Isometry3::from_parts(goal.position_b.into(), goal.orientation_b);
+            let _ = publisher.publish(PoseStamped {
+                header: Header {
+                    stamp,
+                    frame_id: frame.clone(),
+                },
+                pose: geometry::pose(&pose),
+            });
+        }
+    }
+    if let Some(tool) = &decision.tool_pose_w {
+        let _ = io.tool_pose.publish(PoseStamped {
+            header: Header {
+                stamp,
+                frame_id: odom_frame.to_string(),
+            },
+            pose: geometry::pose(tool),
+        });
+    }
+}
+
+/// Refuses to start when another whole-body node already publishes this robot's tool pose.
+fn refuse_duplicates(
+    node: &mut RosNode,
+    config: &WholeBodyNodeConfig,
+    own: ros2_client::Gid,
+) -> Result<(), WholeBodyNodeError> {
+    let topic = topics::tool_pose(&config.robot);
+    let listener = node.strict_subscription::<PoseStamped>(&topic, qos::default())?;
+    let deadline = Instant::now() + config.duplicate_check;
+    while Instant::now() < deadline {
+        while let Some(taken) = listener.take() {
+            if matches!(taken, Ok((_, writer)) if writer != own) {
+                return Err(WholeBodyNodeError::Duplicate {
+                    robot: config.robot.clone(),
+                    topic,
+                });
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(())
+}
+
+/// Runs the node until `shutdown` is set.
+pub fn run(
+    config: WholeBodyNodeConfig,
+    shutdown: Arc<AtomicBool>,
+) -> Result<(), WholeBodyNodeError> {
+    let mut controller = prepare(&config)?;
+    let robot = config.robot.as_str();
+    let namespace = format!("/{robot}");
+    let mut node = RosNode::new(&namespace, "whole_body", config.domain_id)?;
+    let _rosout = kumi_ros::rosout::attach(
+        &mut node,
+        &kumi_ros::rosout::logger_name(&namespace, "whole_body"),
+    )?;
+    let io = open_io(&mut node, &config, &controller)?;
+    refuse_duplicates(&mut node, &config, io.tool_pose.gid())?;
+    let odom_frame = topics::odom_frame(robot);
+    info!(
+        "whole-body node up: /{robot}, {} arm and {} wheel modules, domain {}; send targets to {}",
+        io.goals.len(),
+        io.wheels.len(),
+        node.domain_id(),
+        topics::robot_goal_pose(robot)
+    );
+
+    let start = Instant::now();
+    let period_s = 1.0 / kumi_model::commands::CONTROL_HZ;
+    let mut tick = Tick::new(controller.modules().to_vec());
+    let mut report = Report::default();
+    let mut report_at = Instant::now();
+    let mut log = RateLimited::new(Duration::from_secs(1));
+    let mut hold_log = RateLimited::new(Duration::from_secs(2));
+    let mut progress_log = RateLimited::new(Duration::from_secs(2));
+    let mut last_odom_stamp: Option<Time> = None;
+    let mut last_decision_s = 0.0;
+    let mut last_stale_hold_s = f64::NEG_INFINITY;
+    let mut base_xy: Option<[f64; 2]> = None;
+
+    while !shutdown.load(Ordering::Relaxed) {
+        let now_s = start.elapsed().as_secs_f64();
+        for _ in 0..MAX_TAKEN {
+            match io.target.take() {
+                None => break,
+                Some(Ok((msg, _))) => {
+                    match target::accept(&msg, &odom_frame, base_xy, config.max_target_distance_m) {
+                        Ok(t) => {
+                            report.targets_accepted += 1;
+                            let p = t.position_w;
+                            info!(
+                                "new target: ({:.2}, {:.2}, {:.2}) m, yaw {:.2} rad",
+                                p.x, p.y, p.z, t.yaw
+                            );
+                            controller.set_target(t);
+                        }
+                        Err(why) => {
+                            report.targets_rejected += 1;
+                            if let Some(n) = log.check(Instant::now()) {
+                                warn!("target rejected: {why} ({n} more suppressed)");
+                            }
+                        }
+                    }
+                }
+                Some(Err(why)) => {
+                    report.malformed += 1;
+                    if log.check(Instant::now()).is_some() {
+                        warn!("refused a malformed target: {why}");
+                    }
+                }
+            }
+        }
+        for _ in 0..MAX_TAKEN {
+            match io.odom.take() {
+                None => break,
+                Some(Ok((msg, _))) => match base_state(&msg) {
+                    Some(base) => {
+                        let stamp = msg.header.stamp;
+                        if last_odom_stamp.is_some_and(|before| stamp < before) {
+                            info!("odometry time went back (a restarted simulator); starting over");
+                            report.sim_restarts += 1;
+                            tick.forget();
+                        }
+                        last_odom_stamp = Some(stamp);
+                        base_xy = Some([base.pose_w.translation.x, base.pose_w.translation.y]);
+                        tick.base(stamp, base, now_s);
+                    }
+                    None => {
+                        report.odometry_rejected += 1;
+                        if log.check(Instant::now()).is_some() {
+                            warn!("odometry rejected: a non-finite value or a zero quaternion");
+                        }
+                    }
+                },
+                Some(Err(why)) => {
+                    report.malformed += 1;
+                    if log.check(Instant::now()).is_some() {
+                        warn!("refused a malformed odometry message: {why}");
+                    }
+                }
+            }
+        }
+        for (index, sub) in io.joint_states.iter().enumerate() {
+            let module = &controller.modules()[index];
+            for _ in 0..MAX_TAKEN {
+                match sub.take() {
+                    None => break,
+                    Some(Ok((msg, _))) => {
+                        let names = controller.joint_names(index);
+                        match kumi_ros::joint_state::read_named(&msg, module, names) {
+                            Ok((q, qd)) => {
+                                tick.joints(index, msg.header.stamp, ModuleState { q, qd }, now_s)
+                            }
+                            Err(why) => {
+                                report.joint_states_rejected += 1;
+                                if let Some(n) = log.check(Instant::now()) {
+                                    warn!("{module}: joint state rejected: {why} ({n} more suppressed)");
+                                }
+                            }
+                        }
+                    }
+                    Some(Err(why)) => {
+                        report.malformed += 1;
+                        if log.check(Instant::now()).is_some() {
+                            warn!("{module}: refused a malformed joint state: {why}");
+                        }
+                    }
+                }
+            }
+        }
+
+        let decision = match tick.due(now_s, period_s, config.stale_after_s) {
+            Due::Wait => {
+                // Nothing new for too long: hold, once per control period.
+                let age_s = now_s - last_decision_s;
+                (age_s >= config.stale_after_s && now_s - last_stale_hold_s >= period_s).then(
+                    || {
+                        last_stale_hold_s = now_s;
+                        let why = Hold::Stale {
+                            input: "odometry messages".into(),
+                            age_s,
+                        };
+                        (
+                            controller.hold(why, None),
+                            last_odom_stamp.unwrap_or_default(),
+                        )
+                    },
+                )
+            }
+            Due::Stale { input, age_s } => {
+                last_decision_s = now_s;
+                let why = Hold::Stale { input, age_s };
+                Some((
+                    controller.hold(why, None),
+                    last_odom_stamp.unwrap_or_default(),
+                ))
+            }
+            Due::Act(snapshot) => {
+                last_decision_s = now_s;
+                if snapshot.synchronous {
+                    report.synchronous_ticks += 1;
+                } else {
+                    report.unsynchronised_ticks += 1;
+                }
+                Some((controller.step(&snapshot), snapshot.stamp))
+            }
+        };
+        if let Some((decision, stamp)) = decision {
+            report.step(decision.hold.as_ref());
+            match &decision.hold {
+                Some(h @ (Hold::Stale { .. } | Hold::PolicyFailed(_))) => {
+                    if hold_log.check(Instant::now()).is_some() {
+                        warn!("holding: {h:?}");
+                    }
+                }
+                _ => {}
+            }
+            if let (Some(target), Some(tool)) = (controller.target(), &decision.tool_pose_w) {
+                let (p, y) = kumi_terms::observation::target_errors(tool, &target);
+                report.errors = Some((p, y));
+                if decision.hold.is_none() && progress_log.check(Instant::now()).is_some() {
+                    info!("tool {p:.3} m and {y:.2} rad from the target");
+                }
+            }
+            publish(&io, &decision, stamp, &odom_frame);
+        }
+        if report_at.elapsed() >= Duration::from_secs(1) {
+            report_at = Instant::now();
+            let _ = io.diagnostics.publish(DiagnosticArray {
+                header: Header {
+                    stamp: last_odom_stamp.unwrap_or_default(),
+                    frame_id: String::new(),
+                },
+                status: vec![report.status(robot)],
+            });
+        }
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    info!("whole-body node /{robot} stopping");
+    Ok(())
+}

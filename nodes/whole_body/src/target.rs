@@ -1,0 +1,105 @@
+//! Target intake: the tool's target as a `geometry_msgs/PoseStamped` in `<robot>/odom`;
+//! position and heading (the yaw of the pose's x axis) are used, as in training.
+
+use kumi_msgs::geometry_msgs::PoseStamped;
+use kumi_terms::observation::tool_yaw;
+use kumi_terms::Target;
+
+/// Why a target was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TargetRejection {
+    #[error("target has a non-finite value or a zero quaternion")]
+    NotAPose,
+    #[error("target is in frame `{found}`; this node takes targets in `{expected}` (or an empty frame id)")]
+    UnknownFrame { found: String, expected: String },
+    #[error("target is {distance_m:.2} m from the robot's base, more than the {limit_m:.1} m this node accepts")]
+    TooFar { distance_m: f64, limit_m: f64 },
+}
+
+/// Reads a target; `odom_frame` is the frame it must be in (an empty frame id is taken as
+/// it). Targets further than `max_distance_m` horizontally from `base_xy` (when known) are
+/// refused: the policy never saw them.
+pub fn accept(
+    msg: &PoseStamped,
+    odom_frame: &str,
+    base_xy: Option<[f64; 2]>,
+    max_distance_m: f64,
+) -> Result<Target, TargetRejection> {
+    let frame = &msg.header.frame_id;
+    if !frame.is_empty() && frame != odom_frame {
+        return Err(TargetRejection::UnknownFrame {
+            found: frame.clone(),
+            expected: odom_frame.to_string(),
+        });
+    }
+    let pose = kumi_ros::geometry::isometry(&msg.pose).ok_or(TargetRejection::NotAPose)?;
+    let p = pose.translation.vector;
+    if let Some([x, y]) = base_xy {
+        let distance_m = (p.x - x).hypot(p.y - y);
+        if distance_m > max_distance_m {
+            return Err(TargetRejection::TooFar {
+                distance_m,
+                limit_m: max_distance_m,
+            });
+        }
+    }
+    Ok(Target {
+        position_w: p,
+        yaw: tool_yaw(&pose.rotation),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kumi_msgs::geometry_msgs::{Point, Pose, Quaternion};
+    use kumi_msgs::std_msgs::Header;
+
+    fn msg(frame: &str, x: f64, yaw: f64) -> PoseStamped {
+        PoseStamped {
+            header: Header {
+                frame_id: frame.into(),
+                ..Default::default()
+            },
+            pose: Pose {
+                position: Point { x, y: 1.0, z: 1.2 },
+                orientation: Quaternion {
+                    x: 0.0,
+                    y: 0.0,
+                    z: (yaw / 2.0).sin(),
+                    w: (yaw / 2.0).cos(),
+                },
+            },
+        }
+    }
+
+    #[test]
+    fn position_and_heading_are_read() {
+        let t = accept(&msg("r/odom", 2.0, 0.7), "r/odom", None, 5.0).unwrap();
+        assert_eq!(t.position_w.x, 2.0);
+        assert!((t.yaw - 0.7).abs() < 1e-12);
+        assert!(accept(&msg("", 2.0, -3.0), "r/odom", Some([0.0, 0.0]), 5.0).is_ok());
+    }
+
+    #[test]
+    fn bad_targets_are_refused() {
+        assert!(matches!(
+            accept(&msg("world", 0.0, 0.0), "r/odom", None, 5.0),
+            Err(TargetRejection::UnknownFrame { .. })
+        ));
+        assert_eq!(
+            accept(&msg("", f64::NAN, 0.0), "r/odom", None, 5.0),
+            Err(TargetRejection::NotAPose)
+        );
+        let mut zero = msg("", 0.0, 0.0);
+        zero.pose.orientation.w = 0.0;
+        assert_eq!(
+            accept(&zero, "r/odom", None, 5.0),
+            Err(TargetRejection::NotAPose)
+        );
+        assert!(matches!(
+            accept(&msg("", 9.0, 0.0), "r/odom", Some([0.0, 0.0]), 5.0),
+            Err(TargetRejection::TooFar { .. })
+        ));
+    }
+}
