@@ -58,6 +58,11 @@ pub struct ArmArgs {
     /// skill acts on the same tick's goal, as in training. 0: act on the latest goal at once.
     #[arg(long, default_value_t = 0.0)]
     pub goal_sync_ms: f64,
+    /// With --goal-sync-ms: send no command before the first goal (in lockstep simulated time
+    /// then stands still until the whole-body node has a target, so a run starts from the
+    /// bridge's start state).
+    #[arg(long)]
+    pub wait_for_first_goal: bool,
 }
 
 pub fn run(args: ArmArgs) -> Result<()> {
@@ -86,6 +91,7 @@ pub fn run(args: ArmArgs) -> Result<()> {
         stale_after_s: args.stale_after,
         duplicate_check: std::time::Duration::from_millis(1500),
         goal_sync_s: args.goal_sync_ms / 1000.0,
+        wait_for_first_goal: args.wait_for_first_goal,
         model,
     };
     let shutdown = Arc::new(AtomicBool::new(false));

@@ -49,6 +49,10 @@ pub struct LaunchArgs {
     /// The skill every arm node runs (default: the shipped policies/arm_reach.onnx).
     #[arg(long)]
     pub skill: Option<PathBuf>,
+    /// Inference backend of every node: auto (ONNX Runtime when ORT_DYLIB_PATH is set, else
+    /// tract), onnxruntime or tract.
+    #[arg(long)]
+    pub backend: Option<String>,
 }
 
 /// One node of a launch: a name for its log lines and the `kumi` arguments that start it.
@@ -119,8 +123,14 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
         if let Some(p) = &args.skill {
             a.extend([s("--policy"), p.display().to_string()]);
         }
+        if let Some(b) = &args.backend {
+            a.extend([s("--backend"), b.clone()]);
+        }
         if !args.no_whole_body {
             a.extend([s("--goal-sync-ms"), s(goal_sync_ms(args.lockstep))]);
+            if args.lockstep {
+                a.push(s("--wait-for-first-goal"));
+            }
         }
         nodes.push(Planned {
             name: s(arm),
@@ -140,6 +150,9 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
         }
         if let Some(p) = &args.skill {
             a.extend([s("--skill"), p.display().to_string()]);
+        }
+        if let Some(b) = &args.backend {
+            a.extend([s("--backend"), b.clone()]);
         }
         nodes.push(Planned {
             name: s("whole_body"),
@@ -164,6 +177,22 @@ fn shell_line(args: &[String]) -> String {
         .join(" ")
 }
 
+/// Makes the child get SIGTERM (a clean stop) when this process dies, however it dies: a
+/// launch killed with SIGKILL leaves no nodes behind.
+fn die_with_parent(command: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    // SAFETY: prctl(PR_SET_PDEATHSIG) only sets a flag of the calling (child) process; it is
+    // async-signal-safe, allocates nothing and touches no state shared with the parent.
+    unsafe {
+        command.pre_exec(|| {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) == -1 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+}
+
 /// Running nodes.
 pub struct Launch {
     children: Vec<(String, Child)>,
@@ -178,7 +207,9 @@ impl Launch {
             children: Vec::new(),
         };
         for node in nodes {
-            let mut child = Command::new(&exe)
+            let mut command = Command::new(&exe);
+            die_with_parent(&mut command);
+            let mut child = command
                 .args(&node.args)
                 .stdin(Stdio::null())
                 .stdout(Stdio::piped())
@@ -312,6 +343,7 @@ mod tests {
             no_whole_body: false,
             policy: None,
             skill: None,
+            backend: None,
         }
     }
 
@@ -328,9 +360,11 @@ mod tests {
             shell_line(&nodes[0].args),
             "kumi sim-bridge tricycle --robot tricycle --lockstep"
         );
-        assert!(nodes[1]
-            .args
-            .ends_with(&["--goal-sync-ms".into(), "250".into()]));
+        assert!(nodes[1].args.ends_with(&[
+            "--goal-sync-ms".into(),
+            "250".into(),
+            "--wait-for-first-goal".into()
+        ]));
 
         let mut without = args("tricycle");
         let left_out = nodes[1].name.clone();

@@ -374,8 +374,7 @@ def cmd_target(args, peer):
     peer.listen(Clock, "/clock")
     statuses = latest_diagnostics(peer)
     target = peer.create_publisher(PoseStamped, f"/{r}/goal_pose", DEFAULT)
-    if not peer.spin_until(lambda: tool_topic in peer.latest and "/clock" in peer.latest
-                           and target.get_subscription_count() > 0, args.timeout):
+    if not peer.spin_until(lambda: "/clock" in peer.latest and target.get_subscription_count() > 0, args.timeout):
         return {"error": "whole-body node or bridge not found"}
     sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
     x, y, z, yaw = [float(v) for v in args.goal.split(",")]

@@ -243,6 +243,7 @@ impl ArmNode {
             stale_after_s: 0.2,
             duplicate_check: Duration::from_millis(1500),
             goal_sync_s: 0.0,
+            wait_for_first_goal: false,
         };
         let shutdown = Arc::new(AtomicBool::new(false));
         let flag = shutdown.clone();

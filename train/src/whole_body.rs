@@ -13,7 +13,7 @@ use kumi_policies::observation::{self as skill_obs, Goal, JOINTS, OBSERVATION_DI
 use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy};
 use kumi_terms::action::{ActionTerms, GoalBounds};
-use kumi_terms::observation::{self as body_obs, BodyState, Target};
+use kumi_terms::observation::{self as body_obs, BodyState, Target, ToolChain};
 use kumi_worlds::{home_joint_positions, Engine, SimConfig, SimWorld};
 use nalgebra::{Isometry3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -96,6 +96,7 @@ pub struct WholeBody {
     /// Actuator indices of every wheel joint (wheel modules in order).
     wheel_joints: Vec<usize>,
     tool_link: String,
+    tool_chain: ToolChain,
     skill: SkillPolicy,
     config: WholeBodyConfig,
     episode_steps: usize,
@@ -161,6 +162,7 @@ impl WholeBody {
             wheel_modules,
             wheel_joints,
             tool_link,
+            tool_chain: ToolChain::new(&model).map_err(EnvError::Goals)?,
             skill,
             config,
             episode_steps,
@@ -252,6 +254,15 @@ impl WholeBody {
         body_obs::target_errors(&self.tool_pose_w(), &self.target)
     }
 
+    /// The manipulator's tool pose as the policy observes it: forward kinematics of the
+    /// joint angles from the base pose ([`ToolChain`]), as the whole-body node computes it.
+    pub fn observed_tool_pose_w(&self) -> Isometry3<f64> {
+        let q = self.world.joint_positions();
+        let names = self.world.actuator_names();
+        self.tool_chain
+            .tool_pose_w(&self.world.base_pose(), names.into_iter().zip(q))
+    }
+
     /// The observation the policy sees now.
     pub fn observation(&self) -> Vec<f32> {
         let velocities = self.world.joint_velocities();
@@ -259,7 +270,7 @@ impl WholeBody {
         body_obs::build(&BodyState {
             base_pose_w: self.world.base_pose(),
             base_linear_velocity_w: self.world.base_twist_w().0,
-            tool_pose_w: self.tool_pose_w(),
+            tool_pose_w: self.observed_tool_pose_w(),
             target: self.target,
             wheel_velocities: &wheels,
             previous_action: &self.previous_action,

@@ -69,6 +69,9 @@ pub struct ArmNodeConfig {
     /// stamp before acting on that joint state ([`GoalSync`]; 0: act on the latest goal at
     /// once). Set when a whole-body node sends the goals.
     pub goal_sync_s: f64,
+    /// With goal sync: send nothing before the first goal (lockstep bring-up with a whole-body
+    /// node: simulated time stands still until the robot has a target).
+    pub wait_for_first_goal: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -199,6 +202,27 @@ fn listen_to_own_output(
             Box::new(move || writers(&sub))
         }
     })
+}
+
+/// Publishes the node's diagnostics once a second.
+fn publish_report(
+    io: &Io,
+    report_at: &mut Instant,
+    report: &Report,
+    robot: &str,
+    module: &str,
+    now: f64,
+) {
+    if report_at.elapsed() >= Duration::from_secs(1) {
+        *report_at = Instant::now();
+        let _ = io.diagnostics.publish(DiagnosticArray {
+            header: Header {
+                stamp: Time::from_seconds(now),
+                frame_id: String::new(),
+            },
+            status: vec![report.status(robot, module)],
+        });
+    }
 }
 
 /// Runs the node until `shutdown` is set.
@@ -402,10 +426,17 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         };
 
         let measured_at = prepared.controller.joints().map(|(_, t)| *t);
+        if config.wait_for_first_goal && goal_stamp.is_none() {
+            // Nothing is commanded before the first goal.
+            publish_report(&io, &mut report_at, &report, robot, module, now);
+            std::thread::sleep(Duration::from_micros(200));
+            continue;
+        }
         if config.goal_sync_s > 0.0 && sim && schedule.fresh() {
             if let Some(t) = measured_at {
                 match goal_sync.check(t, goal_stamp, wall_now) {
                     Sync::Wait => {
+                        publish_report(&io, &mut report_at, &report, robot, module, now);
                         std::thread::sleep(Duration::from_micros(100));
                         continue;
                     }
@@ -466,16 +497,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                 });
             }
         }
-        if report_at.elapsed() >= Duration::from_secs(1) {
-            report_at = Instant::now();
-            let _ = io.diagnostics.publish(DiagnosticArray {
-                header: Header {
-                    stamp: Time::from_seconds(now),
-                    frame_id: String::new(),
-                },
-                status: vec![report.status(robot, module)],
-            });
-        }
+        publish_report(&io, &mut report_at, &report, robot, module, now);
         std::thread::sleep(Duration::from_micros(200));
     }
     info!("arm node /{robot}/{module} stopping");

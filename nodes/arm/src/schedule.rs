@@ -64,7 +64,11 @@ impl Schedule {
         // A tolerance of 1e-9 s absorbs rounding in stamps built from step counts.
         let period_elapsed = now - self.last_step_at >= self.period_s - 1e-9;
         let due = if self.sim {
-            self.fresh || period_elapsed
+            // Without a new joint state, act (to hold) only once the latest is two periods
+            // old: one period after it, the next tick's joint state may still be on its way
+            // behind the clock, and acting on the old one would answer that tick for it.
+            let missing = measured_at.is_none_or(|t| now - t >= 2.0 * self.period_s - 1e-9);
+            self.fresh || (period_elapsed && missing)
         } else {
             period_elapsed
         };
@@ -193,9 +197,12 @@ mod tests {
         // The next step's joint state: act at once.
         s.joint_state(1.0 / 30.0);
         assert!(s.due(1.0 / 30.0, Some(1.0 / 30.0)));
-        // No joint states, but the clock runs on: act once per period (to hold).
-        assert!(!s.due(0.05, Some(1.0 / 30.0)));
-        assert!(s.due(2.0 / 30.0, Some(1.0 / 30.0)));
+        // The clock moved on a period but the tick's joint state has not arrived: wait for it.
+        assert!(!s.due(2.0 / 30.0, Some(1.0 / 30.0)));
+        // No joint states for two periods: act once per period (to hold).
+        assert!(s.due(3.0 / 30.0, Some(1.0 / 30.0)));
+        assert!(!s.due(3.5 / 30.0, Some(1.0 / 30.0)));
+        assert!(s.due(4.0 / 30.0, Some(1.0 / 30.0)));
     }
 
     #[test]
@@ -214,7 +221,18 @@ mod tests {
         assert_eq!(g.check(3.0, Some(2.0), 1.1), Sync::Late);
         // A new tick starts its own wait.
         assert_eq!(g.check(4.0, Some(2.0), 1.15), Sync::Wait);
-        assert_eq!(GoalSync::new(0.0).check(4.0, Some(2.0), 0.0), Sync::Late);
+        assert_eq!(
+            GoalSync::new(0.0, false).check(4.0, Some(2.0), 0.0),
+            Sync::Late
+        );
+        let mut first = GoalSync::new(0.1, true);
+        assert_eq!(first.check(1.0, None, 0.0), Sync::Wait);
+        assert_eq!(
+            first.check(1.0, None, 10.0),
+            Sync::Wait,
+            "no goal yet: no timeout"
+        );
+        assert_eq!(first.check(1.0, Some(1.0), 10.0), Sync::Ready);
     }
 
     #[test]

@@ -39,7 +39,8 @@ pub fn transform(iso: &Isometry3<f64>) -> Transform {
     }
 }
 
-/// The isometry of a pose message, if its quaternion can be normalised (non-zero, finite).
+/// The isometry of a pose message, if its quaternion can be normalised (non-zero, finite). A
+/// quaternion within 1e-9 of unit length is taken as it is.
 pub fn isometry(pose: &Pose) -> Option<Isometry3<f64>> {
     let p = pose.position;
     let o = pose.orientation;
@@ -52,9 +53,16 @@ pub fn isometry(pose: &Pose) -> Option<Isometry3<f64>> {
     if norm < 1e-9 {
         return None;
     }
+    // A quaternion that is a unit one to within rounding is kept bit for bit: what a node
+    // publishes, another reads back unchanged.
+    let unit = if (norm - 1.0).abs() <= 1e-9 {
+        q
+    } else {
+        q / norm
+    };
     Some(Isometry3::from_parts(
         Translation3::new(p.x, p.y, p.z),
-        UnitQuaternion::new_unchecked(q / norm),
+        UnitQuaternion::new_unchecked(unit),
     ))
 }
 

@@ -9,11 +9,10 @@
 //! hold their joints). The previous action starts over from zeros after a hold, as after a
 //! reset in training.
 
-use kumi_model::kinematics::KinematicTree;
-use kumi_model::{RobotModel, Role};
+use kumi_model::RobotModel;
 use kumi_policies::observation::Goal;
 use kumi_terms::observation::{self, BodyState};
-use kumi_terms::{ActionTerms, Target};
+use kumi_terms::{ActionTerms, Target, ToolChain};
 use nalgebra::Isometry3;
 
 use crate::tick::Snapshot;
@@ -38,7 +37,8 @@ pub struct Decision {
     /// Each arm module's goal in its base frame (the latest ones while holding; `None` before
     /// the first target).
     pub goals: Option<Vec<(String, Goal)>>,
-    /// Each wheel module's wheel velocity [rad/s] (0 while holding).
+    /// Each wheel module's wheel velocity [rad/s] (0 while holding; none before the first
+    /// target).
     pub wheel_velocities: Vec<(String, f64)>,
     pub hold: Option<Hold>,
     /// The manipulator's tool pose in `<robot>/odom`, when the step had state.
@@ -51,8 +51,7 @@ pub struct Decision {
 /// One robot's upper-level controller.
 pub struct WholeBodyController {
     terms: ActionTerms,
-    tree: KinematicTree,
-    tool_link: usize,
+    tool: ToolChain,
     /// Per module of [`Self::modules`]: its joints' names (as in the URDF).
     joints: Vec<Vec<String>>,
     modules: Vec<String>,
@@ -67,18 +66,7 @@ pub struct WholeBodyController {
 impl WholeBodyController {
     /// The controller for `model` with its `terms`, running `policy`.
     pub fn new(model: &RobotModel, terms: ActionTerms, policy: PolicyFn) -> Result<Self, String> {
-        let tree = KinematicTree::new(&model.urdf).map_err(|e| e.to_string())?;
-        let manipulator = model
-            .modules_with_role(Role::Manipulator)
-            .next()
-            .ok_or_else(|| format!("robot `{}` has no manipulator", model.name))?;
-        let tool = manipulator
-            .ee_link
-            .as_ref()
-            .ok_or_else(|| format!("manipulator `{}` has no tool link", manipulator.name))?;
-        let tool_link = tree
-            .link_index(tool)
-            .ok_or_else(|| format!("tool link `{tool}` is not in the URDF"))?;
+        let tool = ToolChain::new(model)?;
         let modules: Vec<String> = terms.terms.iter().map(|t| t.module().to_string()).collect();
         let mut joints = Vec::new();
         let mut wheel_joints = Vec::new();
@@ -96,8 +84,7 @@ impl WholeBodyController {
         Ok(Self {
             previous_action: vec![0.0; terms.size()],
             terms,
-            tree,
-            tool_link,
+            tool,
             joints,
             modules,
             wheel_joints,
@@ -136,8 +123,7 @@ impl WholeBodyController {
             .iter()
             .zip(&state.modules)
             .flat_map(|(names, m)| names.iter().map(String::as_str).zip(m.q.iter().copied()));
-        let q = self.tree.positions(named);
-        self.tree.forward(&state.base.pose_w, &q)[self.tool_link]
+        self.tool.tool_pose_w(&state.base.pose_w, named)
     }
 
     /// One control step on a tick's state.
@@ -198,16 +184,22 @@ impl WholeBodyController {
         }
     }
 
-    /// Holds: wheels stop, arms keep their last goals, the previous action starts over.
+    /// Holds: wheels stop, arms keep their last goals, the previous action starts over. Before
+    /// the first target nothing is commanded at all: the bridge holds what it was never told
+    /// to move, and in lockstep simulated time stands still until there is a target.
     pub fn hold(&mut self, why: Hold, tool_pose_w: Option<Isometry3<f64>>) -> Decision {
         self.previous_action.iter_mut().for_each(|a| *a = 0.0);
+        let commanded = self.last_goals.is_some();
         Decision {
             goals: self.last_goals.clone(),
-            wheel_velocities: self
-                .terms
-                .wheels()
-                .map(|w| (w.module.clone(), 0.0))
-                .collect(),
+            wheel_velocities: match commanded {
+                true => self
+                    .terms
+                    .wheels()
+                    .map(|w| (w.module.clone(), 0.0))
+                    .collect(),
+                false => Vec::new(),
+            },
             hold: Some(why),
             tool_pose_w,
             observation: None,

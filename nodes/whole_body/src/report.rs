@@ -25,6 +25,8 @@ pub struct Report {
     pub unsynchronised_ticks: u64,
     /// The latest tool position error [m] and absolute yaw error [rad], with a target.
     pub errors: Option<(f64, f64)>,
+    /// Stamp [s] of the first tick the policy ran on with the current target.
+    pub target_since_s: Option<f64>,
     hold: Option<Hold>,
 }
 
@@ -73,6 +75,9 @@ impl Report {
         .iter()
         .map(|(k, v)| (*k, v.to_string()))
         .collect();
+        if let Some(t) = self.target_since_s {
+            values.push(("target_since_s", format!("{t:.9}")));
+        }
         if let Some((p, y)) = self.errors {
             values.push(("position_error_m", format!("{p:.4}")));
             values.push(("yaw_error_rad", format!("{y:.4}")));

@@ -279,7 +279,6 @@ pub fn run(
     let mut hold_log = RateLimited::new(Duration::from_secs(2));
     let mut progress_log = RateLimited::new(Duration::from_secs(2));
     let mut last_odom_stamp: Option<Time> = None;
-    let mut last_decision_s = 0.0;
     let mut last_stale_hold_s = f64::NEG_INFINITY;
     let mut base_xy: Option<[f64; 2]> = None;
 
@@ -298,6 +297,8 @@ pub fn run(
                                 p.x, p.y, p.z, t.yaw
                             );
                             controller.set_target(t);
+                            report.target_since_s = None;
+                            tick.decide_again();
                         }
                         Err(why) => {
                             report.targets_rejected += 1;
@@ -376,8 +377,8 @@ pub fn run(
 
         let decision = match tick.due(now_s, period_s, config.stale_after_s) {
             Due::Wait => {
-                // Nothing new for too long: hold, once per control period.
-                let age_s = now_s - last_decision_s;
+                // No odometry for too long: hold, once per control period.
+                let age_s = tick.base_age_s(now_s).unwrap_or(now_s);
                 (age_s >= config.stale_after_s && now_s - last_stale_hold_s >= period_s).then(
                     || {
                         last_stale_hold_s = now_s;
@@ -393,7 +394,6 @@ pub fn run(
                 )
             }
             Due::Stale { input, age_s } => {
-                last_decision_s = now_s;
                 let why = Hold::Stale { input, age_s };
                 Some((
                     controller.hold(why, None),
@@ -401,7 +401,6 @@ pub fn run(
                 ))
             }
             Due::Act(snapshot) => {
-                last_decision_s = now_s;
                 if snapshot.synchronous {
                     report.synchronous_ticks += 1;
                 } else {
@@ -412,6 +411,9 @@ pub fn run(
         };
         if let Some((decision, stamp)) = decision {
             report.step(decision.hold.as_ref());
+            if decision.action.is_some() && report.target_since_s.is_none() {
+                report.target_since_s = Some(stamp.seconds());
+            }
             match &decision.hold {
                 Some(h @ (Hold::Stale { .. } | Hold::PolicyFailed(_))) => {
                     if hold_log.check(Instant::now()).is_some() {

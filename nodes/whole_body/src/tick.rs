@@ -97,6 +97,17 @@ impl Tick {
         });
     }
 
+    /// Decide again on the latest tick (a new target arrived while simulated time stands
+    /// still, or between ticks).
+    pub fn decide_again(&mut self) {
+        self.last_decided = None;
+    }
+
+    /// Seconds [wall] since the latest odometry message arrived; `None` before the first.
+    pub fn base_age_s(&self, now_s: f64) -> Option<f64> {
+        self.base.as_ref().map(|b| now_s - b.arrived_s)
+    }
+
     /// Forgets everything (a restarted simulator: its stamps start over).
     pub fn forget(&mut self) {
         self.base = None;
@@ -188,6 +199,9 @@ mod tests {
             (t(1), 2.0, true)
         );
         assert_eq!(tick.due(0.003, 0.03, 0.5), Due::Wait, "once per tick");
+        tick.decide_again();
+        assert!(matches!(tick.due(0.003, 0.03, 0.5), Due::Act(s) if s.stamp == t(1)));
+        assert_eq!(tick.base_age_s(0.01), Some(0.01));
         // The next tick's joint states first, then its odometry.
         tick.joints(0, t(2), joints(3.0), 0.033);
         tick.joints(1, t(2), joints(4.0), 0.033);

@@ -14,4 +14,4 @@ pub mod contract;
 pub mod observation;
 
 pub use action::{ActionTerms, ArmGoalTerm, GoalBounds, TermError, WheelTerm};
-pub use observation::{BodyState, ObservationSlot, Target};
+pub use observation::{BodyState, ObservationSlot, Target, ToolChain};

@@ -5,6 +5,8 @@
 
 use std::f64::consts::PI;
 
+use kumi_model::kinematics::KinematicTree;
+use kumi_model::{RobotModel, Role};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
 /// One named part of the observation.
@@ -81,6 +83,46 @@ pub fn target_errors(tool_w: &Isometry3<f64>, target: &Target) -> (f64, f64) {
         (target.position_w - tool_w.translation.vector).norm(),
         yaw_error(tool_w, target).abs(),
     )
+}
+
+/// The manipulator's tool pose as a robot can measure it: forward kinematics of its joint
+/// angles from the base pose. Training and the whole-body node both observe it this way (a
+/// simulator's own link pose can differ by its joint constraints' error: micrometres in
+/// rapier).
+#[derive(Debug, Clone)]
+pub struct ToolChain {
+    tree: KinematicTree,
+    tool_link: usize,
+}
+
+impl ToolChain {
+    /// The chain to `model`'s manipulator's tool.
+    pub fn new(model: &RobotModel) -> Result<Self, String> {
+        let tree = KinematicTree::new(&model.urdf).map_err(|e| e.to_string())?;
+        let manipulator = model
+            .modules_with_role(Role::Manipulator)
+            .next()
+            .ok_or_else(|| format!("robot `{}` has no manipulator", model.name))?;
+        let tool = manipulator
+            .ee_link
+            .as_ref()
+            .ok_or_else(|| format!("manipulator `{}` has no tool link", manipulator.name))?;
+        let tool_link = tree
+            .link_index(tool)
+            .ok_or_else(|| format!("tool link `{tool}` is not in the URDF"))?;
+        Ok(Self { tree, tool_link })
+    }
+
+    /// The tool pose in the base pose's frame, for joint positions by URDF joint name (joints
+    /// not named are at 0).
+    pub fn tool_pose_w<'a>(
+        &self,
+        base_pose_w: &Isometry3<f64>,
+        joints: impl IntoIterator<Item = (&'a str, f64)>,
+    ) -> Isometry3<f64> {
+        let q = self.tree.positions(joints);
+        self.tree.forward(base_pose_w, &q)[self.tool_link]
+    }
 }
 
 /// What the observation is built from.

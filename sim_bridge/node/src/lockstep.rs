@@ -17,6 +17,8 @@ pub struct Lockstep {
     received: BTreeSet<String>,
     /// Some command has arrived since the bridge started.
     started: bool,
+    /// A step has run.
+    stepped: bool,
 }
 
 impl Lockstep {
@@ -24,6 +26,15 @@ impl Lockstep {
     pub fn received(&mut self, module: &str) {
         self.received.insert(module.to_string());
         self.started = true;
+    }
+
+    /// Before the first step: the modules whose command topics have a publisher now. The first
+    /// step waits for all of them (or the timeout), so that a run does not start on whichever
+    /// node happened to answer first.
+    pub fn expect_first(&mut self, modules: impl IntoIterator<Item = String>) {
+        if !self.stepped {
+            self.expected = modules.into_iter().collect();
+        }
     }
 
     /// The step may run: something was received and everything expected has arrived.
@@ -34,6 +45,7 @@ impl Lockstep {
     /// After a step: next tick expects the modules that spoke this tick. A module that stayed
     /// silent (the step ran on the timeout) is no longer waited for until it speaks again.
     pub fn stepped(&mut self) {
+        self.stepped = true;
         self.expected = std::mem::take(&mut self.received);
     }
 
@@ -82,5 +94,20 @@ mod tests {
         assert_eq!(l.missing(), vec!["arm0".to_string()]);
         l.stepped();
         assert!(l.active() && !l.ready() && l.missing().is_empty());
+    }
+
+    #[test]
+    fn the_first_step_waits_for_every_module_with_a_publisher() {
+        let mut l = Lockstep::default();
+        l.expect_first(["arm0".to_string(), "wheel0".to_string()]);
+        l.received("wheel0");
+        assert!(!l.ready(), "arm0's node is up: its first answer is awaited");
+        assert!(l.active(), "and the timeout applies");
+        l.received("arm0");
+        assert!(l.ready());
+        l.stepped();
+        l.expect_first(["arm0".to_string()]);
+        l.received("arm0");
+        assert!(!l.ready(), "after the first step only who spoke counts");
     }
 }

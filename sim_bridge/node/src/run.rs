@@ -324,8 +324,12 @@ fn apply(
     }
 }
 
-fn module_positions(world: &dyn SimWorld, model: &RobotModel) -> BTreeMap<String, Vec<f64>> {
-    let q = world.joint_positions();
+/// Per module, `values` (indexed like the world's actuators) of its position joints.
+fn per_module(
+    world: &dyn SimWorld,
+    model: &RobotModel,
+    values: &[f64],
+) -> BTreeMap<String, Vec<f64>> {
     model
         .modules
         .iter()
@@ -334,10 +338,46 @@ fn module_positions(world: &dyn SimWorld, model: &RobotModel) -> BTreeMap<String
             let positions: Vec<f64> = range
                 .zip(&m.actuators)
                 .filter(|(_, a)| a.mode == ActuatorMode::Position)
-                .map(|(i, _)| q[i])
+                .map(|(i, _)| values[i])
                 .collect();
             Some((m.name.clone(), positions))
         })
+        .collect()
+}
+
+/// Each module's measured joint angles (where a module that goes stale holds).
+fn module_positions(world: &dyn SimWorld, model: &RobotModel) -> BTreeMap<String, Vec<f64>> {
+    per_module(world, model, &world.joint_positions())
+}
+
+/// Each module's servo set-points: what the first increments are added to, as in training
+/// (at the start state, the home angles exactly, where the measured angles may differ in the
+/// last bits).
+fn module_targets(world: &dyn SimWorld, model: &RobotModel) -> BTreeMap<String, Vec<f64>> {
+    per_module(world, model, &world.commands())
+}
+
+/// Modules whose command topics have a publisher other than this node now.
+fn commanded_modules(node: &RosNode, robot: &str, io: &Io) -> Vec<String> {
+    io.inputs
+        .iter()
+        .filter(|m| {
+            [
+                m.increments
+                    .as_ref()
+                    .map(|_| topics::joint_increments(robot, &m.name)),
+                m.joint_set
+                    .as_ref()
+                    .map(|_| topics::joint_set(robot, &m.name)),
+                m.wheel_velocity
+                    .as_ref()
+                    .map(|_| topics::wheel_velocity(robot, &m.name)),
+            ]
+            .into_iter()
+            .flatten()
+            .any(|topic| node.remote_publishers(&topic) > 0)
+        })
+        .map(|m| m.name.clone())
         .collect()
 }
 
@@ -376,7 +416,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
 
     let mut commands = Commands::new(
         &model,
-        &module_positions(world.as_ref(), &model),
+        &module_targets(world.as_ref(), &model),
         config.stale_after_s,
         world.config().control_hz,
     );
@@ -393,6 +433,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     let mut next_tick = Instant::now();
     let mut diag_at = Instant::now() + Duration::from_secs(1);
     let mut diag_window = (Instant::now(), 0_u64);
+    let mut discovered_at = Instant::now() - Duration::from_secs(1);
 
     let publish_state = |world: &dyn SimWorld, steps: u64, accel_w: &Vector3<f64>| {
         let stamp = Time::from_seconds(steps as f64 * control_dt);
@@ -441,6 +482,14 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             }
         }
 
+        // Before the first step in lockstep: wait for every node that commands a module.
+        if matches!(config.mode, Mode::Lockstep { .. })
+            && steps == 0
+            && discovered_at.elapsed() >= Duration::from_millis(50)
+        {
+            discovered_at = Instant::now();
+            lockstep.expect_first(commanded_modules(&node, &config.robot, &io));
+        }
         // Step when it is time.
         let due = match config.mode {
             Mode::RealTime { .. } => Instant::now() >= next_tick,

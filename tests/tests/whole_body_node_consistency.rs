@@ -1,0 +1,141 @@
+//! The whole-body node feeds its policy what training fed it: for the same simulated state,
+//! the observation the node builds from the messages the sim bridge publishes (odometry, each
+//! module's joint states) equals the training environment's observation bit for bit, on every
+//! shipped robot with a manipulator, step after step of an episode driven by varied actions.
+
+use std::sync::{Arc, Mutex};
+
+use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
+use kumi_msgs::builtin_interfaces::Time;
+use kumi_sim_bridge::state;
+use kumi_terms::{ActionTerms, GoalBounds};
+use kumi_train::body_reward::BodyWeights;
+use kumi_train::whole_body::{TaskConfig, WholeBody, WholeBodyConfig};
+use kumi_whole_body_node::tick::{ModuleState, Snapshot};
+use kumi_whole_body_node::WholeBodyController;
+use kumi_worlds::Engine;
+
+fn model(name: &str) -> Arc<RobotModel> {
+    let library = ModuleLibrary::shipped();
+    Arc::new(assemble(
+        &load_morphology(name, &library).unwrap(),
+        &library,
+    ))
+}
+
+const BOUNDS: GoalBounds = GoalBounds {
+    manipulator_position_m: 0.25,
+    manipulator_rotation_rad: 0.5,
+    leg_position_m: 0.1,
+    leg_roll_rad: 0.5,
+};
+
+fn env(model: Arc<RobotModel>, engine: Engine) -> WholeBody {
+    let config = WholeBodyConfig {
+        engine,
+        task: TaskConfig {
+            episode_s: 12.0,
+            tilt_limit_rad: 3.0,
+            target_xy_m: 3.0,
+            target_z_m: [0.9, 1.5],
+            initial_xy_m: 0.5,
+        },
+        weights: BodyWeights {
+            w_p1: 1.0,
+            w_p2: 1.0,
+            w_o: 0.1,
+            w_v: 1e-4,
+            w_a: 0.005,
+            alive: 0.2,
+        },
+        bounds: BOUNDS,
+    };
+    let skill = std::fs::read(kumi_runtime::shipped_arm_policy()).unwrap();
+    WholeBody::new(model, config, &skill, 3).unwrap()
+}
+
+/// The state as the node gathers it from the bridge's messages for one tick.
+fn snapshot(
+    world: &dyn kumi_worlds::SimWorld,
+    controller: &WholeBodyController,
+    robot: &str,
+) -> Snapshot {
+    let stamp = Time::from_seconds(1.0);
+    let odom = state::odometry(world, robot, stamp);
+    let base = kumi_whole_body_node::run::base_state(&odom).expect("finite odometry");
+    let modules = controller
+        .modules()
+        .iter()
+        .enumerate()
+        .map(|(i, module)| {
+            let msg = state::joint_state(world, module, stamp).expect("a module with joints");
+            let (q, qd) =
+                kumi_ros::joint_state::read_named(&msg, module, controller.joint_names(i)).unwrap();
+            ModuleState { q, qd }
+        })
+        .collect();
+    Snapshot {
+        stamp,
+        base,
+        modules,
+        synchronous: true,
+    }
+}
+
+fn check(name: &str, engine: Engine) {
+    let model = model(name);
+    let mut env = env(model.clone(), engine);
+    let seen: Arc<Mutex<Vec<f32>>> = Arc::default();
+    let record = seen.clone();
+    let size = env.terms().size();
+    let mut k = 0u32;
+    // A policy whose actions sweep the whole range (and past it, where clipping applies).
+    let policy = Box::new(move |obs: &[f32]| {
+        *record.lock().unwrap() = obs.to_vec();
+        k += 1;
+        Ok((0..size)
+            .map(|i| (0.7 * (k as f32) + 1.3 * i as f32).sin() * 1.2)
+            .collect())
+    });
+    let terms = ActionTerms::new(&model, &BOUNDS).unwrap();
+    let mut controller = WholeBodyController::new(&model, terms, policy).unwrap();
+    let mut worst = (0.0_f32, String::new());
+    for step in 0..40 {
+        controller.set_target(env.target());
+        let snap = snapshot(env.world(), &controller, name);
+        let decision = controller.step(&snap);
+        let node_obs = seen.lock().unwrap().clone();
+        let env_obs = env.observation();
+        assert_eq!(node_obs.len(), env_obs.len());
+        for (i, (a, b)) in node_obs.iter().zip(&env_obs).enumerate() {
+            let d = (a - b).abs();
+            if d > worst.0 {
+                worst = (d, format!("step {step}, value {i}: node {a}, training {b}"));
+            }
+        }
+        let action = decision.action.expect("a target is set: the policy ran");
+        let out = env.step(&action);
+        assert!(!out.terminated || step > 0, "{name}: fell at once");
+    }
+    assert!(
+        worst.0 == 0.0,
+        "{name} ({engine}): the node's observation differs from training's by up to {} ({})",
+        worst.0,
+        worst.1
+    );
+}
+
+#[test]
+fn the_node_observation_equals_training_bit_for_bit_rapier() {
+    for name in ["minimal", "dragon", "tricycle"] {
+        check(name, Engine::Rapier);
+    }
+}
+
+#[cfg(feature = "mujoco")]
+#[test]
+fn the_node_observation_equals_training_bit_for_bit_mujoco() {
+    for name in ["minimal", "dragon", "tricycle"] {
+        check(name, Engine::Mujoco);
+    }
+}
