@@ -200,8 +200,20 @@ pub struct Launch {
 
 impl Launch {
     /// Starts every planned node as a child process of this executable, its output prefixed
-    /// with its name on this process's stderr.
-    pub fn start(nodes: &[Planned]) -> Result<Self> {
+    /// with its name on this process's stderr, or appended to `log` when given; on ROS
+    /// `domain` when given (else `ROS_DOMAIN_ID` as it is).
+    pub fn start(
+        nodes: &[Planned],
+        domain: Option<u16>,
+        log: Option<&std::path::Path>,
+    ) -> Result<Self> {
+        let log = match log {
+            Some(path) => Some(std::sync::Arc::new(std::sync::Mutex::new(
+                std::fs::File::create(path)
+                    .with_context(|| format!("creating {}", path.display()))?,
+            ))),
+            None => None,
+        };
         let exe = std::env::current_exe().context("finding the kumi executable")?;
         let mut launch = Launch {
             children: Vec::new(),
@@ -209,6 +221,9 @@ impl Launch {
         for node in nodes {
             let mut command = Command::new(&exe);
             die_with_parent(&mut command);
+            if let Some(d) = domain {
+                command.env("ROS_DOMAIN_ID", d.to_string());
+            }
             let mut child = command
                 .args(&node.args)
                 .stdin(Stdio::null())
@@ -230,9 +245,18 @@ impl Launch {
             .flatten()
             {
                 let name = node.name.clone();
+                let log = log.clone();
                 std::thread::spawn(move || {
                     for line in BufReader::new(stream).lines().map_while(|l| l.ok()) {
-                        eprintln!("[{name}] {line}");
+                        match &log {
+                            Some(file) => {
+                                use std::io::Write;
+                                if let Ok(mut f) = file.lock() {
+                                    let _ = writeln!(f, "[{name}] {line}");
+                                }
+                            }
+                            None => eprintln!("[{name}] {line}"),
+                        }
                     }
                 });
             }
@@ -281,22 +305,28 @@ impl Drop for Launch {
     }
 }
 
+/// Fails, saying how to get one, when the robot has no whole-body policy to launch with.
+pub fn check_policy(model: &kumi_model::RobotModel, args: &LaunchArgs) -> Result<()> {
+    let policy = args
+        .policy
+        .clone()
+        .unwrap_or_else(|| kumi_runtime::shipped_whole_body_policy(&model.name));
+    if !policy.exists() {
+        bail!(
+            "no whole-body policy for `{}` at {}: train one (`kumi train whole-body {}`) and pass --policy, or launch with --no-whole-body",
+            model.name,
+            policy.display(),
+            args.morphology
+        );
+    }
+    Ok(())
+}
+
 pub fn run(args: LaunchArgs) -> Result<()> {
     let model = load_model(&args.morphology)?;
     let nodes = plan(&model, &args)?;
     if !args.no_whole_body {
-        let policy = args
-            .policy
-            .clone()
-            .unwrap_or_else(|| kumi_runtime::shipped_whole_body_policy(&model.name));
-        if !policy.exists() {
-            bail!(
-                "no whole-body policy for `{}` at {}: train one (`kumi train whole-body {}`) and pass --policy, or launch with --no-whole-body",
-                model.name,
-                policy.display(),
-                args.morphology
-            );
-        }
+        check_policy(&model, &args)?;
     }
     let domain = std::env::var("ROS_DOMAIN_ID").unwrap_or_else(|_| "0".into());
     eprintln!(
@@ -311,7 +341,7 @@ pub fn run(args: LaunchArgs) -> Result<()> {
     let flag = shutdown.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
-    let mut launch = Launch::start(&nodes)?;
+    let mut launch = Launch::start(&nodes, None, None)?;
     let result = loop {
         if shutdown.load(Ordering::Relaxed) {
             eprintln!("launch: stopping every node");

@@ -4,9 +4,11 @@ mod arm;
 mod bench;
 mod bench_learn;
 mod bridge;
+mod demo;
 mod engine;
 mod eval;
 mod launch;
+mod plot;
 mod report;
 mod sim;
 mod train;
@@ -47,6 +49,9 @@ enum Command {
     /// Run the whole-body node: a robot's upper-level policy, sending each arm module's goal and
     /// each wheel module's velocity (stop with Ctrl-C).
     WholeBody(whole_body::WholeBodyArgs),
+    /// The whole system end to end: launch a robot on a private ROS domain, send it targets,
+    /// report each target's final tool error, with a top-down plot and a CSV of the run.
+    Demo(demo::DemoArgs),
     /// Bring up a whole robot: the sim bridge, one arm node per arm module and the whole-body
     /// node, each its own process (stop all with Ctrl-C).
     Launch(launch::LaunchArgs),
@@ -126,6 +131,7 @@ fn run() -> Result<()> {
         Command::Arm(args) => arm::run(args),
         Command::WholeBody(args) => whole_body::run(args),
         Command::Launch(args) => launch::run(args),
+        Command::Demo(args) => demo::run(args),
         Command::Train { what } => train::run(what),
         Command::Eval { what } => eval::run(what),
         Command::Bench { what } => bench::run(what),

@@ -192,3 +192,144 @@ fn a_launched_minimal_reaches_a_target_from_rclpy_and_replays_the_in_process_epi
     assert_eq!(worst, 0.0, "the ROS loop left the in-process episode");
     drop(launch);
 }
+
+/// The process ids of `pid`'s children.
+fn children(pid: u32) -> Vec<u32> {
+    std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children"))
+        .unwrap_or_default()
+        .split_whitespace()
+        .filter_map(|p| p.parse().ok())
+        .collect()
+}
+
+/// The command line of process `pid`.
+fn cmdline(pid: u32) -> String {
+    std::fs::read_to_string(format!("/proc/{pid}/cmdline"))
+        .unwrap_or_default()
+        .replace('\0', " ")
+}
+
+/// Runs `kumi args`, which must end on its own within `deadline`; its output.
+fn kumi_once(domain: u16, args: &[&str], deadline: Duration) -> String {
+    let mut p = KumiProcess::spawn(KUMI, &[], args, domain);
+    let start = std::time::Instant::now();
+    while p.alive() && start.elapsed() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(
+        !p.alive(),
+        "`kumi {}` still runs: {}",
+        args.join(" "),
+        p.log()
+    );
+    p.log()
+}
+
+#[test]
+fn modules_join_by_hand_robots_share_a_domain_duplicates_are_refused_and_a_dead_node_stops_its_launch(
+) {
+    let domain = fresh_domain();
+    // `first` without its arm node; the node started by hand joins.
+    let first = launch(
+        domain,
+        &[
+            "minimal",
+            "--robot",
+            "first",
+            "--lockstep",
+            "--without",
+            "arm0",
+        ],
+    );
+    assert!(
+        !first.log().contains("kumi arm arm0"),
+        "arm0 was left out: {}",
+        first.log()
+    );
+    let by_hand = KumiProcess::spawn(
+        KUMI,
+        &[],
+        &[
+            "arm",
+            "arm0",
+            "--robot",
+            "first",
+            "--morphology",
+            "minimal",
+            "--goal-sync-ms",
+            "250",
+            "--wait-for-first-goal",
+        ],
+        domain,
+    );
+    assert!(
+        by_hand.wait_for_log("arm node up", START),
+        "{}",
+        by_hand.log()
+    );
+    // `second`, a whole robot of its own on the same domain.
+    let second = launch(domain, &["minimal", "--robot", "second", "--lockstep"]);
+    for robot in ["first", "second"] {
+        let out = send_target(domain, robot, &[]);
+        let error = number(&out["position_error_m"]);
+        println!("{robot}: tool {error:.4} m from the target");
+        assert!(error < 0.125, "{robot}: {out}");
+    }
+
+    // A second node for first's arm0, and a second whole-body node for first: refused.
+    let log = kumi_once(
+        domain,
+        &["arm", "arm0", "--robot", "first", "--morphology", "minimal"],
+        Duration::from_secs(30),
+    );
+    assert!(
+        log.contains("another node already commands module `arm0` of robot `first`"),
+        "{log}"
+    );
+    let log = kumi_once(
+        domain,
+        &["whole-body", "--robot", "first", "--morphology", "minimal"],
+        Duration::from_secs(30),
+    );
+    assert!(
+        log.contains("another whole-body node already drives robot `first`"),
+        "{log}"
+    );
+
+    // second's whole-body node dies: its launch stops every node and says which died.
+    let mut second = second;
+    let nodes = children(second.pid());
+    assert_eq!(nodes.len(), 3, "bridge, arm0, whole_body: {nodes:?}");
+    let whole_body = *nodes
+        .iter()
+        .find(|&&p| cmdline(p).contains("whole-body"))
+        .expect("a whole-body child");
+    std::process::Command::new("kill")
+        .args(["-9", &whole_body.to_string()])
+        .status()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while second.alive() && start.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(
+        !second.alive(),
+        "the launch went on without its whole-body node"
+    );
+    assert!(
+        second.log().contains("node `whole_body` exited"),
+        "{}",
+        second.log()
+    );
+    for p in nodes {
+        assert!(
+            !std::path::Path::new(&format!("/proc/{p}")).exists()
+                || std::fs::read_to_string(format!("/proc/{p}/stat"))
+                    .is_ok_and(|s| s.contains(") Z ")),
+            "node {p} ({}) outlived its launch",
+            cmdline(p)
+        );
+    }
+    drop(first);
+    drop(by_hand);
+}

@@ -394,7 +394,7 @@ def cmd_target(args, peer):
     diagnostics = statuses.get(name, {})
     end = trajectory[-1] if trajectory else None
     return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall,
-            "trajectory": trajectory, "diagnostics": diagnostics,
+            "trajectory": trajectory, "diagnostics": diagnostics, "all_diagnostics": statuses,
             "position_error_m": math.dist(end[1:4], [x, y, z]) if end else None,
             "yaw_error_rad": abs((yaw - end[4] + math.pi) % (2 * math.pi) - math.pi) if end else None}
 

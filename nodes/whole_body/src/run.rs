@@ -291,14 +291,17 @@ pub fn run(
                     match target::accept(&msg, &odom_frame, base_xy, config.max_target_distance_m) {
                         Ok(t) => {
                             report.targets_accepted += 1;
-                            let p = t.position_w;
-                            info!(
-                                "new target: ({:.2}, {:.2}, {:.2}) m, yaw {:.2} rad",
-                                p.x, p.y, p.z, t.yaw
-                            );
-                            controller.set_target(t);
-                            report.target_since_s = None;
-                            tick.decide_again();
+                            // The same target again (a publisher repeating it) changes nothing.
+                            if controller.target() != Some(t) {
+                                let p = t.position_w;
+                                info!(
+                                    "new target: ({:.2}, {:.2}, {:.2}) m, yaw {:.2} rad",
+                                    p.x, p.y, p.z, t.yaw
+                                );
+                                controller.set_target(t);
+                                report.target_since_s = None;
+                                tick.decide_again();
+                            }
                         }
                         Err(why) => {
                             report.targets_rejected += 1;

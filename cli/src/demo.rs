@@ -1,0 +1,416 @@
+//! `kumi demo`: the whole system end to end. Launches a robot (sim bridge in lockstep, an arm
+//! node per arm module, the whole-body node; each its own process) on a private ROS domain,
+//! sends it targets one after another as a user would (`/<robot>/goal_pose`), and reports
+//! each target's final tool error and time, with a top-down plot (SVG) and a CSV of the run.
+//! Needs no ROS install and no native library (tract, rapier).
+
+use std::f64::consts::PI;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use kumi_msgs::geometry_msgs::PoseStamped;
+use kumi_msgs::nav_msgs::Odometry;
+use kumi_msgs::std_msgs::Header;
+use kumi_ros::{geometry, qos, topics, RosNode};
+use kumi_terms::observation::{target_errors, tool_yaw, Target};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::launch::{self, Launch, LaunchArgs};
+use crate::plot;
+use crate::sim::load_model;
+
+#[derive(Args, Debug)]
+pub struct DemoArgs {
+    /// `minimal`, `dragon`, `tricycle`, or a morphology file with a whole-body policy.
+    pub morphology: String,
+    /// How many targets, one after another.
+    #[arg(long, default_value_t = 3)]
+    pub targets: usize,
+    /// Seed of the targets.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Simulated seconds per target (the training episodes' length).
+    #[arg(long, default_value_t = 12.0)]
+    pub seconds: f64,
+    /// Where the plot, the CSV and the nodes' log go (default: runs/demo-<robot>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// The ROS domain (default: a private one from this process's id, 100-199).
+    #[arg(long)]
+    pub domain: Option<u16>,
+    /// The whole-body policy (default: the shipped one).
+    #[arg(long)]
+    pub policy: Option<PathBuf>,
+    /// One JSON object on stdout: {robot, targets: [{target: [x, y, z, yaw], position_error_m,
+    /// yaw_error_rad, seconds}], plot, csv}.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Where targets are drawn: within `xy_m` of the start along x and y, height in `z_m`.
+struct TargetRange {
+    xy_m: f64,
+    z_m: [f64; 2],
+}
+
+/// The targets of a run: seeded, within the range the policy was trained on.
+fn draw_targets(n: usize, seed: u64, range: &TargetRange) -> Vec<Target> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| Target {
+            position_w: Vector3::new(
+                rng.random_range(-range.xy_m..range.xy_m),
+                rng.random_range(-range.xy_m..range.xy_m),
+                rng.random_range(range.z_m[0]..range.z_m[1]),
+            ),
+            yaw: rng.random_range(-PI..PI),
+        })
+        .collect()
+}
+
+/// One sample of the run, as the CSV has it.
+struct Sample {
+    t_s: f64,
+    target: usize,
+    base: [f64; 3],
+    tool: Isometry3<f64>,
+}
+
+/// What one target came to.
+#[derive(serde::Serialize)]
+struct Outcome {
+    target: [f64; 4],
+    position_error_m: f64,
+    yaw_error_rad: f64,
+    /// Simulated seconds until the tool first came within 0.1 m of the target (`null`: never).
+    seconds: Option<f64>,
+}
+
+#[derive(serde::Serialize)]
+struct Report {
+    robot: String,
+    targets: Vec<Outcome>,
+    plot: String,
+    csv: String,
+}
+
+fn target_msg(target: &Target, frame: &str) -> PoseStamped {
+    let pose = Isometry3::from_parts(
+        target.position_w.into(),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), target.yaw),
+    );
+    PoseStamped {
+        header: Header {
+            stamp: Default::default(),
+            frame_id: frame.to_string(),
+        },
+        pose: geometry::pose(&pose),
+    }
+}
+
+pub fn run(args: DemoArgs) -> Result<()> {
+    if args.targets == 0 || !(args.seconds.is_finite() && args.seconds > 0.0) {
+        bail!("--targets and --seconds must be positive");
+    }
+    let model = load_model(&args.morphology)?;
+    let robot = model.name.clone();
+    let launch_args = LaunchArgs {
+        morphology: args.morphology.clone(),
+        robot: Some(robot.clone()),
+        lockstep: true,
+        engine: None,
+        without: Vec::new(),
+        no_whole_body: false,
+        policy: args.policy.clone(),
+        skill: None,
+        backend: Some("tract".into()),
+    };
+    launch::check_policy(&model, &launch_args)?;
+    let range = match crate::train::read_body_config(None, &robot) {
+        Ok(c) => TargetRange {
+            xy_m: c.task.target_xy_m,
+            z_m: c.task.target_z_m,
+        },
+        Err(_) => TargetRange {
+            xy_m: 3.0,
+            z_m: [0.9, 1.5],
+        },
+    };
+    let targets = draw_targets(args.targets, args.seed, &range);
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("runs/demo-{robot}")));
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let domain = args
+        .domain
+        .unwrap_or(100 + (std::process::id() % 100) as u16);
+    let nodes = launch::plan(&model, &launch_args)?;
+    eprintln!(
+        "demo: `{robot}` on ROS domain {domain} (watch with ROS_DOMAIN_ID={domain} ros2 topic echo /{robot}/tool_pose); nodes log to {}",
+        out.join("nodes.log").display()
+    );
+    let shutdown = Arc::new(AtomicBool::new(false));
+    let flag = shutdown.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    let mut launched = Launch::start(&nodes, Some(domain), Some(&out.join("nodes.log")))?;
+    let result = drive(
+        &model,
+        &robot,
+        domain,
+        &targets,
+        &args,
+        &shutdown,
+        &mut launched,
+    );
+    launched.stop(Duration::from_secs(5));
+    let samples = result?;
+    report(&robot, &targets, &samples, &out, args.json)
+}
+
+/// Sends the targets one by one and records the run.
+fn drive(
+    model: &kumi_model::RobotModel,
+    robot: &str,
+    domain: u16,
+    targets: &[Target],
+    args: &DemoArgs,
+    shutdown: &AtomicBool,
+    launched: &mut Launch,
+) -> Result<Vec<Sample>> {
+    let mut node = RosNode::new(&format!("/{robot}"), "demo", domain)?;
+    let publisher =
+        node.publisher::<PoseStamped>(&topics::robot_goal_pose(robot), qos::default())?;
+    let tool =
+        node.strict_subscription::<PoseStamped>(&topics::tool_pose(robot), qos::default())?;
+    let odom = node.strict_subscription::<Odometry>(&topics::odom(robot), qos::default())?;
+    // Every node up: the whole-body node's and each arm node's outputs are discovered.
+    let mut outputs = vec![topics::tool_pose(robot)];
+    for m in model.modules.iter().filter(|m| m.ee_link.is_some()) {
+        outputs.push(topics::joint_increments(robot, &m.name));
+    }
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while outputs.iter().any(|t| node.remote_publishers(t) == 0) {
+        if let Some((name, status)) = launched.exited() {
+            bail!("node `{name}` exited ({status}) during start-up; see the nodes' log");
+        }
+        if Instant::now() > deadline || shutdown.load(Ordering::Relaxed) {
+            bail!("the nodes did not come up within 120 s; see the nodes' log");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    let frame = topics::odom_frame(robot);
+    let mut samples = Vec::new();
+    let mut base = [0.0; 3];
+    let mut t_end = 0.0_f64;
+    for (i, target) in targets.iter().enumerate() {
+        let t_start = t_end;
+        let mut sent_at = None::<Instant>;
+        let mut moved = false;
+        loop {
+            if shutdown.load(Ordering::Relaxed) {
+                bail!("interrupted");
+            }
+            if let Some((name, status)) = launched.exited() {
+                bail!("node `{name}` exited ({status}); see the nodes' log");
+            }
+            // Sent until the robot answers (a target sent before the whole-body node's
+            // subscription is matched would be lost); repeating it changes nothing.
+            if !moved && sent_at.is_none_or(|s| s.elapsed() > Duration::from_millis(500)) {
+                let _ = publisher.publish(target_msg(target, &frame));
+                sent_at = Some(Instant::now());
+            }
+            while let Some(msg) = odom.take() {
+                if let Ok((m, _)) = msg {
+                    let p = m.pose.pose.position;
+                    let q = geometry::isometry(&m.pose.pose)
+                        .map(|iso| tool_yaw(&iso.rotation))
+                        .unwrap_or(0.0);
+                    base = [p.x, p.y, q];
+                }
+            }
+            let mut done = false;
+            while let Some(msg) = tool.take() {
+                let Ok((m, _)) = msg else { continue };
+                let Some(pose) = geometry::isometry(&m.pose) else {
+                    continue;
+                };
+                let t = m.header.stamp.seconds();
+                if t <= t_start {
+                    continue;
+                }
+                moved = true;
+                t_end = t_end.max(t);
+                samples.push(Sample {
+                    t_s: t,
+                    target: i,
+                    base,
+                    tool: pose,
+                });
+                done |= t >= t_start + args.seconds;
+            }
+            if done {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let last = samples.last().expect("samples of this target");
+        let (p, y) = target_errors(&last.tool, target);
+        eprintln!(
+            "target {}: ({:.2}, {:.2}, {:.2}) m, yaw {:.2} rad -> tool {p:.3} m and {y:.2} rad away after {:.1} s",
+            i + 1,
+            target.position_w.x,
+            target.position_w.y,
+            target.position_w.z,
+            target.yaw,
+            args.seconds
+        );
+    }
+    Ok(samples)
+}
+
+/// Writes the CSV and the plot; prints the table (or the JSON object).
+fn report(
+    robot: &str,
+    targets: &[Target],
+    samples: &[Sample],
+    out: &std::path::Path,
+    json: bool,
+) -> Result<()> {
+    let csv_path = out.join("run.csv");
+    let mut csv = String::from(
+        "t_s,target,target_x_m,target_y_m,target_z_m,target_yaw_rad,base_x_m,base_y_m,base_yaw_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,position_error_m,yaw_error_rad\n",
+    );
+    let mut outcomes = Vec::new();
+    for (i, target) in targets.iter().enumerate() {
+        let mine: Vec<&Sample> = samples.iter().filter(|s| s.target == i).collect();
+        let start = mine.first().map_or(0.0, |s| s.t_s);
+        let mut reached = None;
+        for s in &mine {
+            let (p, y) = target_errors(&s.tool, target);
+            if p < 0.1 && reached.is_none() {
+                reached = Some(s.t_s - start);
+            }
+            let t = s.tool.translation.vector;
+            csv.push_str(&format!(
+                "{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}\n",
+                s.t_s,
+                i + 1,
+                target.position_w.x,
+                target.position_w.y,
+                target.position_w.z,
+                target.yaw,
+                s.base[0],
+                s.base[1],
+                s.base[2],
+                t.x,
+                t.y,
+                t.z,
+                tool_yaw(&s.tool.rotation),
+                p,
+                y
+            ));
+        }
+        let (p, y) = mine
+            .last()
+            .map_or((f64::NAN, f64::NAN), |s| target_errors(&s.tool, target));
+        outcomes.push(Outcome {
+            target: [
+                target.position_w.x,
+                target.position_w.y,
+                target.position_w.z,
+                target.yaw,
+            ],
+            position_error_m: p,
+            yaw_error_rad: y,
+            seconds: reached,
+        });
+    }
+    std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
+    let svg_path = out.join("run.svg");
+    let svg = plot::top_down(
+        &format!("kumi demo: {robot}, top view"),
+        &[
+            plot::Path {
+                label: "base".into(),
+                colour: "#7f7f7f",
+                points: samples.iter().map(|s| [s.base[0], s.base[1]]).collect(),
+            },
+            plot::Path {
+                label: "tool".into(),
+                colour: "#1f77b4",
+                points: samples
+                    .iter()
+                    .map(|s| [s.tool.translation.x, s.tool.translation.y])
+                    .collect(),
+            },
+        ],
+        &targets
+            .iter()
+            .enumerate()
+            .map(|(i, t)| plot::Mark {
+                label: format!("{}", i + 1),
+                xy: [t.position_w.x, t.position_w.y],
+                yaw: t.yaw,
+            })
+            .collect::<Vec<_>>(),
+    );
+    std::fs::write(&svg_path, svg).with_context(|| format!("writing {}", svg_path.display()))?;
+    let report = Report {
+        robot: robot.to_string(),
+        targets: outcomes,
+        plot: svg_path.display().to_string(),
+        csv: csv_path.display().to_string(),
+    };
+    if json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!("| target | x, y, z [m] | yaw [rad] | final position error [m] | final yaw error [rad] | within 0.1 m after [s] |");
+        println!("|---|---|---|---|---|---|");
+        for (i, o) in report.targets.iter().enumerate() {
+            println!(
+                "| {} | {:.2}, {:.2}, {:.2} | {:.2} | {:.3} | {:.2} | {} |",
+                i + 1,
+                o.target[0],
+                o.target[1],
+                o.target[2],
+                o.target[3],
+                o.position_error_m,
+                o.yaw_error_rad,
+                o.seconds.map_or("never".into(), |s| format!("{s:.1}"))
+            );
+        }
+        println!("plot: {}\ncsv: {}", report.plot, report.csv);
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn targets_are_seeded_and_inside_the_trained_range() {
+        let range = TargetRange {
+            xy_m: 3.0,
+            z_m: [0.9, 1.5],
+        };
+        let a = draw_targets(20, 4, &range);
+        assert_eq!(a.len(), 20);
+        assert!(a.iter().all(|t| t.position_w.x.abs() <= 3.0
+            && t.position_w.y.abs() <= 3.0
+            && (0.9..1.5).contains(&t.position_w.z)
+            && t.yaw.abs() <= PI));
+        let b = draw_targets(20, 4, &range);
+        assert_eq!(a[7].position_w, b[7].position_w);
+        assert_ne!(draw_targets(1, 5, &range)[0].position_w, a[0].position_w);
+    }
+}
