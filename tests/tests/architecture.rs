@@ -45,7 +45,12 @@ const SIMULATION: [&str; 6] = [
 
 #[test]
 fn the_nodes_that_run_on_hardware_link_no_simulator() {
-    for node in ["kumi-arm-node", "kumi-terms", "kumi-runtime"] {
+    for node in [
+        "kumi-arm-node",
+        "kumi-whole-body-node",
+        "kumi-terms",
+        "kumi-runtime",
+    ] {
         let deps = dependencies(node);
         assert!(deps.len() > 3, "{node}: no dependency graph: {deps:?}");
         let found: Vec<&String> = deps
@@ -53,6 +58,10 @@ fn the_nodes_that_run_on_hardware_link_no_simulator() {
             .filter(|d| SIMULATION.contains(&d.as_str()))
             .collect();
         assert!(found.is_empty(), "{node} links the simulator: {found:?}");
+        assert!(
+            !deps.iter().any(|d| d == "kumi-train" || d == "candle-core"),
+            "{node} links the trainer"
+        );
     }
 }
 
