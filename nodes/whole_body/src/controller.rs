@@ -21,13 +21,16 @@ use crate::tick::Snapshot;
 pub type PolicyFn = Box<dyn FnMut(&[f32]) -> Result<Vec<f32>, String> + Send>;
 
 /// Why a step held.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Hold {
     /// No target received yet.
+    #[error("no target yet")]
     NoTarget,
     /// An input is missing or too old.
+    #[error("{input} are {age_s:.2} s old")]
     Stale { input: String, age_s: f64 },
     /// The policy failed (its message).
+    #[error("policy failed: {0}")]
     PolicyFailed(String),
 }
 

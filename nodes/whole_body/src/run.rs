@@ -417,13 +417,10 @@ pub fn run(
             if decision.action.is_some() && report.target_since_s.is_none() {
                 report.target_since_s = Some(stamp.seconds());
             }
-            match &decision.hold {
-                Some(h @ (Hold::Stale { .. } | Hold::PolicyFailed(_))) => {
-                    if hold_log.check(Instant::now()).is_some() {
-                        warn!("holding: {h:?}");
-                    }
+            if let Some(h @ (Hold::Stale { .. } | Hold::PolicyFailed(_))) = &decision.hold {
+                if hold_log.check(Instant::now()).is_some() {
+                    warn!("holding: {h}");
                 }
-                _ => {}
             }
             if let (Some(target), Some(tool)) = (controller.target(), &decision.tool_pose_w) {
                 let (p, y) = kumi_terms::observation::target_errors(tool, &target);
