@@ -63,6 +63,11 @@ pub struct ArmArgs {
     /// bridge's start state).
     #[arg(long)]
     pub wait_for_first_goal: bool,
+    /// On MoonBot hardware: the Motion Stack profile (limb namespaces, joint names; see the
+    /// README). Joint states come from the limb's `joint_read`, absolute targets go to its
+    /// `joint_set`.
+    #[arg(long, value_name = "PROFILE")]
+    pub hardware: Option<PathBuf>,
 }
 
 pub fn run(args: ArmArgs) -> Result<()> {
@@ -73,6 +78,10 @@ pub fn run(args: ArmArgs) -> Result<()> {
         bail!("--goal-sync-ms must be a number of milliseconds >= 0");
     }
     let model = load_model(args.morphology.as_deref().unwrap_or(&args.robot))?;
+    let hardware = match &args.hardware {
+        Some(path) => Some(Arc::new(crate::launch::load_profile(&model, path)?)),
+        None => None,
+    };
     let config = ArmNodeConfig {
         robot: args.robot,
         module: args.module,
@@ -92,6 +101,7 @@ pub fn run(args: ArmArgs) -> Result<()> {
         duplicate_check: std::time::Duration::from_millis(1500),
         goal_sync_s: args.goal_sync_ms / 1000.0,
         wait_for_first_goal: args.wait_for_first_goal,
+        hardware,
         model,
     };
     let shutdown = Arc::new(AtomicBool::new(false));

@@ -305,6 +305,33 @@ impl Drop for Launch {
     }
 }
 
+/// A robot's Motion Stack profile, checked against its modules.
+pub fn load_profile(
+    model: &RobotModel,
+    path: &std::path::Path,
+) -> Result<kumi_ros::motion_stack::MotionStackProfile> {
+    let modules: Vec<(String, Vec<String>)> = model
+        .modules
+        .iter()
+        .filter(|m| !m.actuators.is_empty())
+        .map(|m| {
+            let prefix = format!("{}/", m.name);
+            let joints = m
+                .actuators
+                .iter()
+                .map(|a| {
+                    a.joint
+                        .strip_prefix(&prefix)
+                        .unwrap_or(&a.joint)
+                        .to_string()
+                })
+                .collect();
+            (m.name.clone(), joints)
+        })
+        .collect();
+    kumi_ros::motion_stack::MotionStackProfile::load(path, &modules).map_err(anyhow::Error::msg)
+}
+
 /// Fails, saying how to get one, when the robot has no whole-body policy to launch with.
 pub fn check_policy(model: &kumi_model::RobotModel, args: &LaunchArgs) -> Result<()> {
     let policy = args

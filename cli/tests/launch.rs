@@ -411,3 +411,45 @@ fn the_demo_runs_end_to_end_with_its_plot_csv_and_json() {
     assert!(csv.lines().count() > 2 * 300, "two 12 s targets at 30 Hz");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn the_whole_body_node_holds_through_a_dead_bridge_and_resumes_with_its_replacement() {
+    // Each node by hand, in real time, as on separate hosts.
+    let domain = fresh_domain();
+    let start_bridge = || {
+        let b = KumiProcess::spawn(KUMI, &[], &["sim-bridge", "minimal"], domain);
+        assert!(b.wait_for_log("sim bridge up", START), "{}", b.log());
+        b
+    };
+    let bridge = start_bridge();
+    let arm = KumiProcess::spawn(
+        KUMI,
+        &[],
+        &["arm", "arm0", "--robot", "minimal", "--goal-sync-ms", "10"],
+        domain,
+    );
+    let whole_body = KumiProcess::spawn(KUMI, &[], &["whole-body", "--robot", "minimal"], domain);
+    assert!(
+        whole_body.wait_for_log("whole-body node up", START),
+        "{}",
+        whole_body.log()
+    );
+    let first = send_target(domain, "minimal", &[]);
+    assert!(number(&first["position_error_m"]) < 0.15, "{first}");
+
+    bridge.kill9();
+    assert!(
+        whole_body.wait_for_log("holding", Duration::from_secs(10)),
+        "no hold without odometry: {}",
+        whole_body.log()
+    );
+    let _replacement = start_bridge();
+    // The new simulator starts over at home; the node still has its target and drives to it.
+    let second = send_target(domain, "minimal", &[]);
+    let d = &second["diagnostics"];
+    println!("after the bridge's restart: {d}");
+    assert!(number(&second["position_error_m"]) < 0.15, "{second}");
+    assert!(number(&d["stale_holds"]) >= 1.0, "{d}");
+    assert!(number(&d["sim_restarts"]) >= 1.0, "{d}");
+    drop(arm);
+}

@@ -318,9 +318,12 @@ def cmd_reach(args, peer):
     peer.listen(PoseStamped, ee_topic)
     peer.listen(Clock, "/clock")
     goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
-    if not peer.spin_until(lambda: ee_topic in peer.latest and "/clock" in peer.latest and goal.get_subscription_count() > 0, args.timeout):
+    if not peer.spin_until(lambda: ee_topic in peer.latest and (args.wall or "/clock" in peer.latest) and goal.get_subscription_count() > 0, args.timeout):
         return {"error": "arm node or bridge not found"}
-    sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
+    if args.wall:  # on hardware there is no /clock: wall time
+        sim = time.monotonic
+    else:
+        sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
     if args.disturb:
         # Another publisher moves joint2 (issue 10, finding 1; within the skill's start range of
         # +-0.5 rad), and a wild increment arrives: the bridge owns the targets, so neither may
@@ -397,6 +400,74 @@ def cmd_target(args, peer):
             "trajectory": trajectory, "diagnostics": diagnostics, "all_diagnostics": statuses,
             "position_error_m": math.dist(end[1:4], [x, y, z]) if end else None,
             "yaw_error_rad": abs((yaw - end[4] + math.pi) % (2 * math.pi) - math.pi) if end else None}
+
+
+def cmd_fakelimb(args, peer):
+    """A fake Motion Stack limb (MoonBot's driver) at --frame (its namespace, `/leg7`) with the
+    joints --arms (comma-separated): takes absolute targets on `joint_set` (positions by name;
+    velocities for wheels), moves each joint toward its target at 0.05 rad per 30 Hz tick, and
+    publishes `joint_read` as Motion Stack does: once when a subscriber appears, then only when a joint moved by
+    1e-3 rad or more (its encoder's resolution) since the last message. Runs --drive-seconds,
+    then leaves cleanly."""
+    ns = args.frame
+    names = args.arms.split(",")
+    q = {n: 0.0 for n in names}
+    target = dict(q)
+    sent = dict(q)
+    counts = {"joint_set": 0, "joint_read": 0}
+    read = peer.create_publisher(JointState, f"{ns}/joint_read", DEFAULT)
+
+    def on_set(m):
+        counts["joint_set"] += 1
+        for i, n in enumerate(m.name):
+            if n in target and i < len(m.position) and math.isfinite(m.position[i]):
+                target[n] = m.position[i]
+
+    peer.create_subscription(JointState, f"{ns}/joint_set", on_set, DEFAULT)
+
+    def publish():
+        read.publish(JointState(name=names, position=[q[n] for n in names], velocity=[0.0] * len(names)))
+        sent.update(q)
+        counts["joint_read"] += 1
+
+    end = time.monotonic() + args.drive_seconds
+    # Its first reading once someone listens (a reading published before the node subscribed
+    # would be lost, as it is with Motion Stack's volatile joint_read).
+    peer.spin_until(lambda: read.get_subscription_count() > 0, args.drive_seconds)
+    peer.spin_until(lambda: False, 0.5)
+    next_tick = time.monotonic()
+    longest_quiet, last_read = 0.0, time.monotonic()
+    publish()
+    while time.monotonic() < end:
+        rclpy.spin_once(peer, timeout_sec=0.005)
+        if time.monotonic() < next_tick:
+            continue
+        next_tick += 1.0 / 30.0
+        for n in names:
+            q[n] += max(-0.05, min(0.05, target[n] - q[n]))
+        if any(abs(q[n] - sent[n]) >= 1e-3 for n in names):
+            longest_quiet = max(longest_quiet, time.monotonic() - last_read)
+            last_read = time.monotonic()
+            publish()
+    longest_quiet = max(longest_quiet, time.monotonic() - last_read)
+    return {"counts": counts, "longest_quiet_s": longest_quiet, "position": [q[n] for n in names]}
+
+
+def cmd_diagnostics(args, peer):
+    """Every /diagnostics status heard within --drive-seconds: name -> its latest key/values
+    (with `message` and `level`)."""
+    statuses = {}
+
+    def on_diag(m):
+        for status in m.status:
+            values = {kv.key: kv.value for kv in status.values}
+            values["message"] = status.message
+            values["level"] = int.from_bytes(status.level, "little") if isinstance(status.level, bytes) else int(status.level)
+            statuses[status.name] = values
+
+    peer.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DEFAULT)
+    peer.spin_until(lambda: False, args.drive_seconds)
+    return statuses
 
 
 def cmd_flood(args, peer):
@@ -747,6 +818,7 @@ def main():
     p.add_argument("--goal", default="")
     p.add_argument("--frame", default="")
     p.add_argument("--within", type=float, default=0.0)
+    p.add_argument("--wall", action="store_true")
     args = p.parse_args()
     if args.command == "latency":
         args.samples = int(args.samples or 50)
@@ -758,7 +830,8 @@ def main():
             "lockstep": cmd_lockstep, "badinput": cmd_badinput, "latency": cmd_latency,
             "reach": cmd_reach, "armnode": cmd_armnode, "watch": cmd_watch,
             "malformed": cmd_malformed, "zerobyte": cmd_zerobyte, "rosout": cmd_rosout,
-            "flood": cmd_flood, "target": cmd_target,
+            "flood": cmd_flood, "target": cmd_target, "fakelimb": cmd_fakelimb,
+            "diagnostics": cmd_diagnostics,
         }[args.command](args, peer)
     finally:
         peer.destroy_node()

@@ -244,6 +244,7 @@ impl ArmNode {
             duplicate_check: Duration::from_millis(1500),
             goal_sync_s: 0.0,
             wait_for_first_goal: false,
+            hardware: None,
         };
         let shutdown = Arc::new(AtomicBool::new(false));
         let flag = shutdown.clone();

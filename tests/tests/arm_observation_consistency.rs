@@ -30,6 +30,7 @@ fn the_node_sees_what_training_saw() {
         duplicate_check: std::time::Duration::from_millis(500),
         goal_sync_s: 0.0,
         wait_for_first_goal: false,
+        hardware: None,
     };
     let mut node = Prepared::new(&config).unwrap();
     let mut env = ArmReach::new(model, ArmReachConfig::default(), 17).unwrap();

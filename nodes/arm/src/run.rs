@@ -69,6 +69,11 @@ pub struct ArmNodeConfig {
     /// stamp before acting on that joint state ([`GoalSync`]; 0: act on the latest goal at
     /// once). Set when a whole-body node sends the goals.
     pub goal_sync_s: f64,
+    /// MoonBot hardware (Motion Stack): joint states from the limb's `joint_read` (published
+    /// only on change: a still joint is not stale while the limb's publisher is alive), absolute
+    /// targets on its `joint_set`, joint names as the profile maps them. Forces
+    /// [`Output::JointSet`].
+    pub hardware: Option<Arc<kumi_ros::motion_stack::MotionStackProfile>>,
     /// With goal sync: send nothing before the first goal (lockstep bring-up with a whole-body
     /// node: simulated time stands still until the robot has a target).
     pub wait_for_first_goal: bool,
@@ -234,31 +239,45 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         &mut node,
         &kumi_ros::rosout::logger_name(&format!("/{robot}/{module}"), "arm_node"),
     )?;
-    let output_topic = match config.output {
-        Output::Increments => topics::joint_increments(robot, module),
-        Output::JointSet => topics::joint_set(robot, module),
+    let hardware = config.hardware.as_deref();
+    let output = if hardware.is_some() {
+        Output::JointSet
+    } else {
+        config.output
     };
+    let output_topic = match (hardware, output) {
+        (Some(profile), _) => profile.joint_set(module),
+        (None, Output::Increments) => topics::joint_increments(robot, module),
+        (None, Output::JointSet) => topics::joint_set(robot, module),
+    };
+    let joint_states_topic = match hardware {
+        Some(profile) => profile.joint_read(module),
+        None => topics::joint_states(robot, module),
+    };
+    // The skill's joints as the joint states and targets name them.
+    let joint_names: Vec<String> = prepared
+        .controller
+        .skill()
+        .joints
+        .iter()
+        .map(|j| hardware.map_or_else(|| j.clone(), |p| p.joint_name(module, j)))
+        .collect();
     let duplicate = || ArmNodeError::Duplicate {
         robot: robot.to_string(),
         module: module.to_string(),
         topic: output_topic.clone(),
     };
-    let mut heard = listen_to_own_output(&mut node, config.output, &output_topic)?;
+    let mut heard = listen_to_own_output(&mut node, output, &output_topic)?;
     let io = Io {
         goal: node.strict_subscription(&topics::goal_pose(robot, module), qos::default())?,
-        joint_states: node
-            .strict_subscription(&topics::joint_states(robot, module), qos::default())?,
+        joint_states: node.strict_subscription(&joint_states_topic, qos::default())?,
         clock: node.strict_subscription(topics::CLOCK, qos::default())?,
-        increments: match config.output {
-            Output::Increments => {
-                Some(node.publisher(&topics::joint_increments(robot, module), qos::default())?)
-            }
+        increments: match output {
+            Output::Increments => Some(node.publisher(&output_topic, qos::default())?),
             Output::JointSet => None,
         },
-        joint_set: match config.output {
-            Output::JointSet => {
-                Some(node.publisher(&topics::joint_set(robot, module), qos::default())?)
-            }
+        joint_set: match output {
+            Output::JointSet => Some(node.publisher(&output_topic, qos::default())?),
             Output::Increments => None,
         },
         ee_pose: node.publisher(&topics::ee_pose(robot, module), qos::default())?,
@@ -280,8 +299,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     }
     let mut warned_about = std::collections::BTreeSet::new();
     info!(
-        "arm node up: /{robot}/{module}, output {:?}, clock {:?}, domain {}",
-        config.output,
+        "arm node up: /{robot}/{module}, joint states from {joint_states_topic}, output {output:?} on {output_topic}, clock {:?}, domain {}",
         config.clock,
         node.domain_id()
     );
@@ -297,6 +315,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     let mut goal_stamp: Option<f64> = None;
     let mut report = Report::default();
     let mut report_at = Instant::now();
+    let mut liveliness_at = Instant::now();
 
     while !shutdown.load(Ordering::Relaxed) {
         // Someone who started commanding this module later (a second arm node refuses to
@@ -384,31 +403,27 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         }
         for _ in 0..MAX_TAKEN {
             match io.joint_states.take() {
-                Some(Ok((msg, _))) => {
-                    match joints::read(&msg, module, &prepared.controller.skill().joints) {
-                        Ok(j) => {
-                            let t = if sim {
-                                msg.header.stamp.seconds()
-                            } else {
-                                wall_now
-                            };
-                            if sim {
-                                clock.stamp(t);
-                            }
-                            schedule.joint_state(t);
-                            latest_stamp = msg.header.stamp;
-                            prepared.controller.set_joints(j, t);
+                Some(Ok((msg, _))) => match joints::read(&msg, module, &joint_names) {
+                    Ok(j) => {
+                        let t = if sim {
+                            msg.header.stamp.seconds()
+                        } else {
+                            wall_now
+                        };
+                        if sim {
+                            clock.stamp(t);
                         }
-                        Err(why) => {
-                            report.joint_states_rejected += 1;
-                            if let Some(n) = log.check(Instant::now()) {
-                                warn!(
-                                    "{module}: joint state rejected: {why} ({n} more suppressed)"
-                                );
-                            }
+                        schedule.joint_state(t);
+                        latest_stamp = msg.header.stamp;
+                        prepared.controller.set_joints(j, t);
+                    }
+                    Err(why) => {
+                        report.joint_states_rejected += 1;
+                        if let Some(n) = log.check(Instant::now()) {
+                            warn!("{module}: joint state rejected: {why} ({n} more suppressed)");
                         }
                     }
-                }
+                },
                 None => break,
                 Some(Err(why)) => {
                     report.malformed += 1;
@@ -425,6 +440,16 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
             wall_now
         };
 
+        // Motion Stack publishes `joint_read` only on change: while the limb's publisher is
+        // alive, its last joint state still holds (a still joint is not a stale one).
+        if hardware.is_some() && !sim && liveliness_at.elapsed() >= Duration::from_millis(100) {
+            liveliness_at = Instant::now();
+            if node.remote_publishers(&joint_states_topic) > 0 {
+                if let Some((j, _)) = prepared.controller.joints().copied() {
+                    prepared.controller.set_joints(j, wall_now);
+                }
+            }
+        }
         let measured_at = prepared.controller.joints().map(|(_, t)| *t);
         if config.wait_for_first_goal && goal_stamp.is_none() {
             // Nothing is commanded before the first goal.
@@ -479,7 +504,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                             stamp: Time::from_seconds(now),
                             frame_id: String::new(),
                         },
-                        name: prepared.controller.skill().joints.clone(),
+                        name: joint_names.clone(),
                         position: targets.to_vec(),
                         velocity: Vec::new(),
                         effort: Vec::new(),

@@ -10,6 +10,7 @@
 
 pub mod geometry;
 pub mod joint_state;
+pub mod motion_stack;
 pub mod qos;
 pub mod rosout;
 pub mod strict;
