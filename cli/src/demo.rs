@@ -130,6 +130,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         policy: args.policy.clone(),
         skill: None,
         backend: Some("tract".into()),
+        hardware: None,
+        profile: None,
     };
     launch::check_policy(&model, &launch_args)?;
     let range = match crate::train::read_body_config(None, &robot) {

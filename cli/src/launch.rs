@@ -53,6 +53,29 @@ pub struct LaunchArgs {
     /// tract), onnxruntime or tract.
     #[arg(long)]
     pub backend: Option<String>,
+    /// On MoonBot hardware: no sim bridge; the nodes talk to Motion Stack's limbs as the
+    /// profile maps them (`--profile`, default beside the morphology file:
+    /// `<morphology>.motion_stack.toml`).
+    #[arg(long, value_enum)]
+    pub hardware: Option<Hardware>,
+    /// The Motion Stack profile for `--hardware motion-stack`.
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
+}
+
+/// Hardware a launch can drive instead of the simulator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Hardware {
+    /// MoonBot's Motion Stack.
+    MotionStack,
+}
+
+/// The Motion Stack profile a launch uses: `--profile`, or the one beside the morphology.
+pub fn profile_path(args: &LaunchArgs) -> PathBuf {
+    args.profile.clone().unwrap_or_else(|| {
+        let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../urdf/morphologies");
+        kumi_ros::motion_stack::default_path(&args.morphology, &shipped)
+    })
 }
 
 /// One node of a launch: a name for its log lines and the `kumi` arguments that start it.
@@ -104,10 +127,16 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
     if let Some(e) = &args.engine {
         bridge.extend([s("--engine"), e.clone()]);
     }
-    let mut nodes = vec![Planned {
-        name: s("sim_bridge"),
-        args: bridge,
-    }];
+    let hardware = args
+        .hardware
+        .map(|_| profile_path(args).display().to_string());
+    let mut nodes = Vec::new();
+    if hardware.is_none() {
+        nodes.push(Planned {
+            name: s("sim_bridge"),
+            args: bridge,
+        });
+    }
     for arm in arms
         .iter()
         .filter(|a| !args.without.iter().any(|w| w == *a))
@@ -126,7 +155,9 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
         if let Some(b) = &args.backend {
             a.extend([s("--backend"), b.clone()]);
         }
-        if !args.no_whole_body {
+        if let Some(p) = &hardware {
+            a.extend([s("--hardware"), p.clone()]);
+        } else if !args.no_whole_body {
             a.extend([s("--goal-sync-ms"), s(goal_sync_ms(args.lockstep))]);
             if args.lockstep {
                 a.push(s("--wait-for-first-goal"));
@@ -150,6 +181,9 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
         }
         if let Some(p) = &args.skill {
             a.extend([s("--skill"), p.display().to_string()]);
+        }
+        if let Some(p) = &hardware {
+            a.extend([s("--hardware"), p.clone()]);
         }
         if let Some(b) = &args.backend {
             a.extend([s("--backend"), b.clone()]);
@@ -351,6 +385,12 @@ pub fn check_policy(model: &kumi_model::RobotModel, args: &LaunchArgs) -> Result
 
 pub fn run(args: LaunchArgs) -> Result<()> {
     let model = load_model(&args.morphology)?;
+    if args.hardware.is_some() {
+        if args.lockstep || args.engine.is_some() {
+            bail!("--hardware runs no simulator: --lockstep and --engine do not apply");
+        }
+        load_profile(&model, &profile_path(&args))?;
+    }
     let nodes = plan(&model, &args)?;
     if !args.no_whole_body {
         check_policy(&model, &args)?;
@@ -401,6 +441,8 @@ mod tests {
             policy: None,
             skill: None,
             backend: None,
+            hardware: None,
+            profile: None,
         }
     }
 
@@ -436,6 +478,21 @@ mod tests {
         assert!(fewer
             .iter()
             .all(|n| !n.args.contains(&"--goal-sync-ms".to_string())));
+
+        let mut hw = args("tricycle");
+        hw.lockstep = false;
+        hw.hardware = Some(Hardware::MotionStack);
+        let on_hardware = plan(&model, &hw).unwrap();
+        assert_eq!(on_hardware.len(), arms + 1, "no bridge");
+        let profile = profile_path(&hw).display().to_string();
+        assert!(profile.ends_with("urdf/morphologies/tricycle.motion_stack.toml"));
+        assert!(on_hardware
+            .iter()
+            .all(|n| n.args.ends_with(&["--hardware".into(), profile.clone()])));
+        assert!(
+            load_profile(&model, &profile_path(&hw)).is_ok(),
+            "the shipped example fits"
+        );
 
         let mut unknown = args("tricycle");
         unknown.without = vec!["tail".into()];

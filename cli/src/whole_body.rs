@@ -38,6 +38,11 @@ pub struct WholeBodyArgs {
     /// trained on targets within 3 m of the origin, the robot starting within 0.5 m of it.
     #[arg(long, default_value_t = 4.5)]
     pub max_target_distance: f64,
+    /// On MoonBot hardware: the Motion Stack profile (limb namespaces, joint names, the
+    /// odometry topic; see the README). Joint states come from each limb's `joint_read`, wheel
+    /// velocities go to each wheel limb's `joint_set`.
+    #[arg(long, value_name = "PROFILE")]
+    pub hardware: Option<PathBuf>,
 }
 
 pub fn run(args: WholeBodyArgs) -> Result<()> {
@@ -48,6 +53,10 @@ pub fn run(args: WholeBodyArgs) -> Result<()> {
         bail!("--max-target-distance must be a positive number of metres");
     }
     let model = load_model(args.morphology.as_deref().unwrap_or(&args.robot))?;
+    let hardware = match &args.hardware {
+        Some(path) => Some(Arc::new(crate::launch::load_profile(&model, path)?)),
+        None => None,
+    };
     let config = WholeBodyNodeConfig {
         policy: args
             .policy
@@ -59,6 +68,7 @@ pub fn run(args: WholeBodyArgs) -> Result<()> {
         stale_after_s: args.stale_after,
         max_target_distance_m: args.max_target_distance,
         duplicate_check: std::time::Duration::from_millis(1500),
+        hardware,
         model,
     };
     let shutdown = Arc::new(AtomicBool::new(false));

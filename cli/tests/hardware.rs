@@ -113,3 +113,144 @@ fn an_arm_node_drives_a_fake_motion_stack_limb_and_tells_a_quiet_limb_from_a_dea
     let _ = std::fs::remove_file(profile);
     drop(node);
 }
+
+/// `peer` in a thread of its own (a fake device that runs while the test goes on).
+fn device(domain: u16, args: Vec<&'static str>) -> std::thread::JoinHandle<serde_json::Value> {
+    std::thread::spawn(move || peer(domain, &args, Duration::from_secs(90)))
+}
+
+#[test]
+fn a_launch_on_hardware_drives_fake_motion_stack_limbs_from_a_target() {
+    let domain = fresh_domain();
+    let profile = std::env::temp_dir().join(format!("kumi-ms-minimal-{}.toml", std::process::id()));
+    std::fs::write(
+        &profile,
+        "odometry = \"/odom\"\n[limbs.arm0]\nnamespace = \"/leg1\"\n[limbs.arm0.joints]\njoint1 = \"leg1_joint1\"\n[limbs.wheel0]\nnamespace = \"/leg10\"\n",
+    )
+    .unwrap();
+    // Minimal's limbs, its arm at home, and a base whose odometry says it does not move.
+    let arm = device(
+        domain,
+        vec![
+            "fakelimb",
+            "--frame",
+            "/leg1",
+            "--arms",
+            "leg1_joint1,joint2,joint3,joint4,joint5,joint6,joint7",
+            "--samples",
+            "0,-0.3,0,1.5,0,0.3707963267948966,0",
+            "--drive-seconds",
+            "30",
+        ],
+    );
+    let wheel = device(
+        domain,
+        vec![
+            "fakelimb",
+            "--frame",
+            "/leg10",
+            "--arms",
+            "wheel_left,wheel_right",
+            "--drive-seconds",
+            "30",
+        ],
+    );
+    let odom = device(
+        domain,
+        vec!["fakeodom", "--frame", "/odom", "--drive-seconds", "30"],
+    );
+    let path = profile.display().to_string();
+    let launch = KumiProcess::spawn(
+        KUMI,
+        &[],
+        &[
+            "launch",
+            "minimal",
+            "--hardware",
+            "motion-stack",
+            "--profile",
+            &path,
+        ],
+        domain,
+    );
+    assert!(
+        launch.wait_for_log("whole-body node up", Duration::from_secs(60)),
+        "{}",
+        launch.log()
+    );
+    assert!(
+        launch.log().contains("2 nodes"),
+        "no sim bridge: {}",
+        launch.log()
+    );
+    // A target within the arm's reach of the standing base, in the odometry's frame.
+    let out = peer(
+        domain,
+        &[
+            "target",
+            "--wall",
+            "--robot",
+            "minimal",
+            "--goal",
+            "0.9,0.15,1.2,0.0",
+            "--frame",
+            "odom",
+            "--drive-seconds",
+            "6",
+            "--timeout",
+            "40",
+        ],
+        Duration::from_secs(60),
+    );
+    let d = &out["diagnostics"];
+    let trajectory = out["trajectory"].as_array().expect("tool poses");
+    let error_at = |row: &serde_json::Value| {
+        let r: Vec<f64> = row.as_array().unwrap().iter().map(number).collect();
+        distance(&r[1..4], &[0.9, 0.15, 1.2])
+    };
+    let (first, last) = (
+        error_at(&trajectory[0]),
+        error_at(trajectory.last().unwrap()),
+    );
+    let at = |row: &serde_json::Value| -> Vec<f64> {
+        row.as_array().unwrap()[1..4].iter().map(number).collect()
+    };
+    let moved = distance(&at(&trajectory[0]), &at(trajectory.last().unwrap()));
+    println!(
+        "on fake hardware: tool {first:.3} m -> {last:.3} m from the target, moved {moved:.3} m; {d}"
+    );
+    assert_eq!(number(&d["targets_accepted"]), 1.0, "{d}");
+    assert_eq!(
+        number(&d["stale_holds"]),
+        0.0,
+        "lazy joint_read is not stale: {d}"
+    );
+    assert!(
+        number(&d["unsynchronised_ticks"]) > 30.0,
+        "hardware stamps: {d}"
+    );
+    // The fake base cannot move, so the policy cannot bring the tool to the target; the chain
+    // target -> whole-body node -> goals -> arm node -> joint_set -> limb -> joint_read ->
+    // tool pose must still move the tool.
+    assert!(moved > 0.02, "the tool did not move: {out}");
+    drop(launch);
+    let (arm, wheel, _) = (
+        arm.join().unwrap(),
+        wheel.join().unwrap(),
+        odom.join().unwrap(),
+    );
+    println!("arm limb {arm}\nwheel limb {wheel}");
+    assert!(number(&arm["counts"]["joint_set"]) > 30.0, "{arm}");
+    // Both wheels driven by the one rule: the module's velocity, the mount's sign, the limit.
+    let v = &wheel["largest_velocity"];
+    let (left, right) = (number(&v["wheel_left"]), number(&v["wheel_right"]));
+    assert!(left.abs() > 0.01 && left == right, "{wheel}");
+    // The launch stopped: the whole-body node stopped the wheels on its way out.
+    let last = &wheel["last_velocity"];
+    assert_eq!(
+        (number(&last["wheel_left"]), number(&last["wheel_right"])),
+        (0.0, 0.0),
+        "{wheel}"
+    );
+    let _ = std::fs::remove_file(profile);
+}

@@ -377,9 +377,12 @@ def cmd_target(args, peer):
     peer.listen(Clock, "/clock")
     statuses = latest_diagnostics(peer)
     target = peer.create_publisher(PoseStamped, f"/{r}/goal_pose", DEFAULT)
-    if not peer.spin_until(lambda: "/clock" in peer.latest and target.get_subscription_count() > 0, args.timeout):
+    if not peer.spin_until(lambda: (args.wall or "/clock" in peer.latest) and target.get_subscription_count() > 0, args.timeout):
         return {"error": "whole-body node or bridge not found"}
-    sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
+    if args.wall:  # on hardware there is no /clock: wall time
+        sim = time.monotonic
+    else:
+        sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
     x, y, z, yaw = [float(v) for v in args.goal.split(",")]
     msg = goal_msg([x, y, z, math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)], args.frame or f"{r}/odom")
     if args.disturb:
@@ -411,10 +414,14 @@ def cmd_fakelimb(args, peer):
     then leaves cleanly."""
     ns = args.frame
     names = args.arms.split(",")
-    q = {n: 0.0 for n in names}
+    start = [float(v) for v in args.samples.split(",")] if args.samples else [0.0] * len(names)
+    q = dict(zip(names, start))  # --samples: the joints' start angles
     target = dict(q)
     sent = dict(q)
     counts = {"joint_set": 0, "joint_read": 0}
+    velocity = {n: 0.0 for n in names}  # wheels: commanded joint velocities [rad/s]
+    wheels = set()
+    largest = {}
     read = peer.create_publisher(JointState, f"{ns}/joint_read", DEFAULT)
 
     def on_set(m):
@@ -422,11 +429,18 @@ def cmd_fakelimb(args, peer):
         for i, n in enumerate(m.name):
             if n in target and i < len(m.position) and math.isfinite(m.position[i]):
                 target[n] = m.position[i]
+            if n in velocity and i < len(m.velocity) and math.isfinite(m.velocity[i]):
+                velocity[n] = m.velocity[i]
+                wheels.add(n)
+                if abs(m.velocity[i]) > abs(largest.get(n, 0.0)):
+                    largest[n] = m.velocity[i]
 
     peer.create_subscription(JointState, f"{ns}/joint_set", on_set, DEFAULT)
 
+    moved = {n: 0.0 for n in names}
+
     def publish():
-        read.publish(JointState(name=names, position=[q[n] for n in names], velocity=[0.0] * len(names)))
+        read.publish(JointState(name=names, position=[q[n] for n in names], velocity=[moved[n] * 30.0 for n in names]))
         sent.update(q)
         counts["joint_read"] += 1
 
@@ -444,13 +458,39 @@ def cmd_fakelimb(args, peer):
             continue
         next_tick += 1.0 / 30.0
         for n in names:
-            q[n] += max(-0.05, min(0.05, target[n] - q[n]))
+            before = q[n]
+            if n in wheels:
+                q[n] += velocity[n] / 30.0
+                target[n] = q[n]
+            else:
+                q[n] += max(-0.05, min(0.05, target[n] - q[n]))
+            moved[n] = q[n] - before
         if any(abs(q[n] - sent[n]) >= 1e-3 for n in names):
             longest_quiet = max(longest_quiet, time.monotonic() - last_read)
             last_read = time.monotonic()
             publish()
     longest_quiet = max(longest_quiet, time.monotonic() - last_read)
-    return {"counts": counts, "longest_quiet_s": longest_quiet, "position": [q[n] for n in names]}
+    return {"counts": counts, "longest_quiet_s": longest_quiet, "position": [q[n] for n in names],
+            "largest_velocity": largest, "last_velocity": {n: velocity[n] for n in wheels}}
+
+
+def cmd_fakeodom(args, peer):
+    """A base that does not move, as a driver reports it: nav_msgs/Odometry at 30 Hz on --frame's
+    topic (`/odom`), frame `odom`, stamped with wall time, for --drive-seconds."""
+    pub = peer.create_publisher(Odometry, args.frame, DEFAULT)
+    end = time.monotonic() + args.drive_seconds
+    n = 0
+    while time.monotonic() < end:
+        m = Odometry()
+        now = time.time()
+        m.header.stamp.sec, m.header.stamp.nanosec = int(now), int((now % 1) * 1e9)
+        m.header.frame_id = "odom"
+        m.child_frame_id = "base"
+        m.pose.pose.orientation.w = 1.0
+        pub.publish(m)
+        n += 1
+        peer.spin_until(lambda: False, 1.0 / 30.0)
+    return {"published": n}
 
 
 def cmd_diagnostics(args, peer):
@@ -831,7 +871,7 @@ def main():
             "reach": cmd_reach, "armnode": cmd_armnode, "watch": cmd_watch,
             "malformed": cmd_malformed, "zerobyte": cmd_zerobyte, "rosout": cmd_rosout,
             "flood": cmd_flood, "target": cmd_target, "fakelimb": cmd_fakelimb,
-            "diagnostics": cmd_diagnostics,
+            "diagnostics": cmd_diagnostics, "fakeodom": cmd_fakeodom,
         }[args.command](args, peer)
     finally:
         peer.destroy_node()

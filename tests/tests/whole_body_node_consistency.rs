@@ -139,3 +139,40 @@ fn the_node_observation_equals_training_bit_for_bit_mujoco() {
         check(name, Engine::Mujoco);
     }
 }
+
+/// The wheel rule the node uses on hardware commands what the simulator's servos are commanded
+/// for the same module velocity (sign by mounting, clamp to the limit), on every wheel module.
+#[test]
+fn wheel_joint_velocities_match_what_the_simulator_commands() {
+    for name in ["minimal", "dragon", "tricycle"] {
+        let model = model(name);
+        let mut world = kumi_worlds::build(
+            Engine::Rapier,
+            model.clone(),
+            kumi_worlds::SimConfig::for_model(&model),
+        )
+        .unwrap();
+        let names: Vec<String> = world
+            .actuator_names()
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        for m in model
+            .modules
+            .iter()
+            .filter(|m| m.velocity_joints().count() > 0)
+        {
+            for v in [3.0, -1.5, 1e3] {
+                world.set_wheel_velocity(&m.name, v).unwrap();
+                let commands = world.commands();
+                let rule =
+                    kumi_model::commands::wheel_joint_velocities(&model, &m.name, v).unwrap();
+                for (joint, value) in rule {
+                    let i = names.iter().position(|n| *n == joint).unwrap();
+                    assert_eq!(commands[i], value, "{name}/{joint} at {v}");
+                }
+            }
+        }
+        assert!(kumi_model::commands::wheel_joint_velocities(&model, "nope", 1.0).is_none());
+    }
+}

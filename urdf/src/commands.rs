@@ -20,6 +20,26 @@ pub fn clamp_command(actuator: &Actuator, command: f64) -> Option<f64> {
     })
 }
 
+/// Each wheel joint's velocity command [rad/s] (`(joint, value)`, in actuator order) for a
+/// wheel module's velocity `v` [rad/s]: positive drives the base along its +x axis with the
+/// robot at home, however the module is mounted ([`crate::RobotModel::wheel_drive_sign`]),
+/// each clamped to its joint's limit. What the simulator's servos are commanded; what the
+/// whole-body node sends a wheel limb on hardware. `None` for a non-finite `v` or a module
+/// without wheels.
+pub fn wheel_joint_velocities(
+    model: &crate::RobotModel,
+    module: &str,
+    v: f64,
+) -> Option<Vec<(String, f64)>> {
+    let m = model.module(module)?;
+    let sign = model.wheel_drive_sign(module);
+    let wheels: Vec<(String, f64)> = m
+        .velocity_joints()
+        .map(|a| Some((a.joint.clone(), clamp_command(a, sign * v)?)))
+        .collect::<Option<_>>()?;
+    (!wheels.is_empty()).then_some(wheels)
+}
+
 /// The meaning of joint increments, everywhere (training, the bridge, the arm node): each
 /// target moves by its increment [rad] and is clamped to its joint's range. `None` if any
 /// increment is non-finite or the lengths differ.

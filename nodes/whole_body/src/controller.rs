@@ -26,7 +26,10 @@ pub enum Hold {
     /// No target received yet.
     #[error("no target yet")]
     NoTarget,
-    /// An input is missing or too old.
+    /// An input has not been heard from yet.
+    #[error("no {input} yet")]
+    Waiting { input: String },
+    /// An input is too old.
     #[error("{input} are {age_s:.2} s old")]
     Stale { input: String, age_s: f64 },
     /// The policy failed (its message).

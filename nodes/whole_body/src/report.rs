@@ -51,6 +51,9 @@ impl Report {
                 "driving the tool to the target".into(),
             ),
             Some(Hold::NoTarget) => (DiagnosticStatus::OK, "holding: no target yet".into()),
+            Some(Hold::Waiting { input }) => {
+                (DiagnosticStatus::WARN, format!("holding: no {input} yet"))
+            }
             Some(Hold::Stale { input, age_s }) => (
                 DiagnosticStatus::WARN,
                 format!("holding: {input} are {age_s:.2} s old"),

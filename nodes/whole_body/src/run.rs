@@ -13,6 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use kumi_model::commands::wheel_joint_velocities;
 use kumi_model::RobotModel;
 use kumi_msgs::builtin_interfaces::Time;
 use kumi_msgs::diagnostic_msgs::DiagnosticArray;
@@ -20,6 +21,7 @@ use kumi_msgs::geometry_msgs::PoseStamped;
 use kumi_msgs::nav_msgs::Odometry;
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_msgs::std_msgs::{Float64, Header};
+use kumi_ros::motion_stack::MotionStackProfile;
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_runtime::{BackendChoice, ModelFile, RuntimeError, WholeBodyPolicy};
 use kumi_terms::{ActionTerms, GoalBounds};
@@ -49,6 +51,10 @@ pub struct WholeBodyNodeConfig {
     pub max_target_distance_m: f64,
     /// How long to listen for another whole-body node of the same robot before starting.
     pub duplicate_check: Duration,
+    /// MoonBot hardware (Motion Stack): each module's joint states from its limb's lazy
+    /// `joint_read`, the base odometry from the profile's topic, wheel velocities as
+    /// `sensor_msgs/JointState` velocities on each wheel limb's `joint_set`.
+    pub hardware: Option<Arc<MotionStackProfile>>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -122,12 +128,25 @@ pub fn prepare(config: &WholeBodyNodeConfig) -> Result<WholeBodyController, Whol
     .map_err(robot_error)
 }
 
+/// Where a wheel module's velocity goes.
+enum WheelOutput {
+    /// The sim bridge's `wheel_velocity` (`std_msgs/Float64`, the module's velocity).
+    Bridge(Publisher<Float64>),
+    /// A Motion Stack limb's `joint_set`: each wheel joint's velocity by its name there.
+    Limb {
+        publisher: Publisher<JointState>,
+        /// Its wheel joints: the model's name and the limb's.
+        joints: Vec<(String, String)>,
+    },
+}
+
 struct Io {
     target: StrictSubscription<PoseStamped>,
     odom: StrictSubscription<Odometry>,
-    joint_states: Vec<StrictSubscription<JointState>>,
+    /// Per module: its joint states and the names to read them by.
+    joint_states: Vec<(StrictSubscription<JointState>, String, Vec<String>)>,
     goals: Vec<(String, String, Publisher<PoseStamped>)>,
-    wheels: Vec<(String, Publisher<Float64>)>,
+    wheels: Vec<(String, WheelOutput)>,
     tool_pose: Publisher<PoseStamped>,
     diagnostics: Publisher<DiagnosticArray>,
 }
@@ -141,10 +160,26 @@ fn open_io(
     controller: &WholeBodyController,
 ) -> Result<Io, WholeBodyNodeError> {
     let robot = config.robot.as_str();
+    let hardware = config.hardware.as_deref();
     let mut joint_states = Vec::new();
-    for module in controller.modules() {
-        joint_states
-            .push(node.strict_subscription(&topics::joint_states(robot, module), qos::default())?);
+    for (index, module) in controller.modules().iter().enumerate() {
+        let names: Vec<String> = controller
+            .joint_names(index)
+            .iter()
+            .map(|j| match hardware {
+                Some(p) => p.joint_name(module, unprefixed(module, j)),
+                None => j.clone(),
+            })
+            .collect();
+        let topic = match hardware {
+            Some(p) => p.joint_read(module),
+            None => topics::joint_states(robot, module),
+        };
+        joint_states.push((
+            node.strict_subscription(&topic, qos::default())?,
+            topic,
+            names,
+        ));
     }
     let mut goals = Vec::new();
     for arm in controller.terms().arms() {
@@ -161,17 +196,37 @@ fn open_io(
     }
     let mut wheels = Vec::new();
     for wheel in controller.terms().wheels() {
-        wheels.push((
-            wheel.module.clone(),
-            node.publisher(
+        let output = match hardware {
+            Some(p) => WheelOutput::Limb {
+                publisher: node.publisher(&p.joint_set(&wheel.module), qos::default())?,
+                joints: config
+                    .model
+                    .module(&wheel.module)
+                    .expect("terms come from the model")
+                    .velocity_joints()
+                    .map(|a| {
+                        let bare = unprefixed(&wheel.module, &a.joint);
+                        (a.joint.clone(), p.joint_name(&wheel.module, bare))
+                    })
+                    .collect(),
+            },
+            None => WheelOutput::Bridge(node.publisher(
                 &topics::wheel_velocity(robot, &wheel.module),
                 qos::default(),
-            )?,
-        ));
+            )?),
+        };
+        wheels.push((wheel.module.clone(), output));
     }
+    let odom = match hardware {
+        Some(p) => p.odometry.clone().ok_or_else(|| WholeBodyNodeError::Robot {
+            robot: config.robot.clone(),
+            message: "the hardware profile names no `odometry` topic; the whole-body node needs the base's".into(),
+        })?,
+        None => topics::odom(robot),
+    };
     Ok(Io {
         target: node.strict_subscription(&topics::robot_goal_pose(robot), qos::default())?,
-        odom: node.strict_subscription(&topics::odom(robot), qos::default())?,
+        odom: node.strict_subscription(&odom, qos::default())?,
         joint_states,
         goals,
         wheels,
@@ -195,10 +250,46 @@ pub fn base_state(msg: &Odometry) -> Option<BaseState> {
     })
 }
 
+/// A joint's name without its module's prefix (`arm0/joint3` -> `joint3`).
+fn unprefixed<'a>(module: &str, joint: &'a str) -> &'a str {
+    joint
+        .strip_prefix(module)
+        .and_then(|j| j.strip_prefix('/'))
+        .unwrap_or(joint)
+}
+
 /// Publishes a decision: wheel velocities first, then the goals stamped with the tick.
-fn publish(io: &Io, decision: &Decision, stamp: Time, odom_frame: &str) {
-    for ((_, publisher), (_, v)) in io.wheels.iter().zip(&decision.wheel_velocities) {
-        let _ = publisher.publish(Float64 { data: *v });
+fn publish(io: &Io, model: &RobotModel, decision: &Decision, stamp: Time, odom_frame: &str) {
+    for ((module, output), (_, v)) in io.wheels.iter().zip(&decision.wheel_velocities) {
+        match output {
+            WheelOutput::Bridge(publisher) => {
+                let _ = publisher.publish(Float64 { data: *v });
+            }
+            WheelOutput::Limb { publisher, joints } => {
+                // The one wheel rule (sign by mounting, clamp), then each joint by its name.
+                let Some(velocities) = wheel_joint_velocities(model, module, *v) else {
+                    continue;
+                };
+                let _ = publisher.publish(JointState {
+                    header: Header {
+                        stamp,
+                        frame_id: String::new(),
+                    },
+                    name: joints.iter().map(|(_, limb)| limb.clone()).collect(),
+                    position: Vec::new(),
+                    velocity: joints
+                        .iter()
+                        .map(|(joint, _)| {
+                            velocities
+                                .iter()
+                                .find(|(j, _)| j == joint)
+                                .map_or(0.0, |(_, v)| *v)
+                        })
+                        .collect(),
+                    effort: Vec::new(),
+                });
+            }
+        }
     }
     if let Some(goals) = &decision.goals {
         for ((_, frame, publisher), (_, goal)) in io.goals.iter().zip(goals) {
@@ -261,7 +352,9 @@ pub fn run(
     )?;
     let io = open_io(&mut node, &config, &controller)?;
     refuse_duplicates(&mut node, &config, io.tool_pose.gid())?;
-    let odom_frame = topics::odom_frame(robot);
+    // Targets and the tool pose are in the odometry's frame: `<robot>/odom` from the sim
+    // bridge, whatever the odometry says on hardware.
+    let mut odom_frame = topics::odom_frame(robot);
     info!(
         "whole-body node up: /{robot}, {} arm and {} wheel modules, domain {}; send targets to {}",
         io.goals.len(),
@@ -281,6 +374,7 @@ pub fn run(
     let mut last_odom_stamp: Option<Time> = None;
     let mut last_stale_hold_s = f64::NEG_INFINITY;
     let mut base_xy: Option<[f64; 2]> = None;
+    let mut liveliness_at = Instant::now();
 
     while !shutdown.load(Ordering::Relaxed) {
         let now_s = start.elapsed().as_secs_f64();
@@ -324,6 +418,9 @@ pub fn run(
                 None => break,
                 Some(Ok((msg, _))) => match base_state(&msg) {
                     Some(base) => {
+                        if config.hardware.is_some() && !msg.header.frame_id.is_empty() {
+                            odom_frame.clone_from(&msg.header.frame_id);
+                        }
                         let stamp = msg.header.stamp;
                         if last_odom_stamp.is_some_and(|before| stamp < before) {
                             info!("odometry time went back (a restarted simulator); starting over");
@@ -350,13 +447,12 @@ pub fn run(
                 }
             }
         }
-        for (index, sub) in io.joint_states.iter().enumerate() {
+        for (index, (sub, _, names)) in io.joint_states.iter().enumerate() {
             let module = &controller.modules()[index];
             for _ in 0..MAX_TAKEN {
                 match sub.take() {
                     None => break,
                     Some(Ok((msg, _))) => {
-                        let names = controller.joint_names(index);
                         match kumi_ros::joint_state::read_named(&msg, module, names) {
                             Ok((q, qd)) => {
                                 tick.joints(index, msg.header.stamp, ModuleState { q, qd }, now_s)
@@ -379,26 +475,40 @@ pub fn run(
             }
         }
 
+        // Motion Stack publishes `joint_read` only on change: while a limb's publisher is alive
+        // its last joint state still holds.
+        if config.hardware.is_some() && liveliness_at.elapsed() >= Duration::from_millis(100) {
+            liveliness_at = Instant::now();
+            for (index, (_, topic, _)) in io.joint_states.iter().enumerate() {
+                if node.remote_publishers(topic) > 0 {
+                    tick.refresh(index, now_s);
+                }
+            }
+        }
         let decision = match tick.due(now_s, period_s, config.stale_after_s) {
             Due::Wait => {
-                // No odometry for too long: hold, once per control period.
-                let age_s = tick.base_age_s(now_s).unwrap_or(now_s);
-                (age_s >= config.stale_after_s && now_s - last_stale_hold_s >= period_s).then(
-                    || {
-                        last_stale_hold_s = now_s;
-                        let why = Hold::Stale {
-                            input: "odometry messages".into(),
-                            age_s,
-                        };
-                        (
-                            controller.hold(why, None),
-                            last_odom_stamp.unwrap_or_default(),
-                        )
-                    },
-                )
+                // No odometry for too long (or none yet): hold, once per control period.
+                let age_s = tick.base_age_s(now_s);
+                let overdue = age_s.is_none_or(|a| a >= config.stale_after_s);
+                (overdue && now_s - last_stale_hold_s >= period_s).then(|| {
+                    last_stale_hold_s = now_s;
+                    let input = "odometry messages".to_string();
+                    let why = match age_s {
+                        Some(age_s) => Hold::Stale { input, age_s },
+                        None => Hold::Waiting { input },
+                    };
+                    (
+                        controller.hold(why, None),
+                        last_odom_stamp.unwrap_or_default(),
+                    )
+                })
             }
             Due::Stale { input, age_s } => {
-                let why = Hold::Stale { input, age_s };
+                let why = if age_s.is_finite() {
+                    Hold::Stale { input, age_s }
+                } else {
+                    Hold::Waiting { input }
+                };
                 Some((
                     controller.hold(why, None),
                     last_odom_stamp.unwrap_or_default(),
@@ -430,7 +540,7 @@ pub fn run(
                     info!("tool {p:.3} m and {y:.2} rad from the target");
                 }
             }
-            publish(&io, &decision, stamp, &odom_frame);
+            publish(&io, &config.model, &decision, stamp, &odom_frame);
         }
         if report_at.elapsed() >= Duration::from_secs(1) {
             report_at = Instant::now();
@@ -444,6 +554,21 @@ pub fn run(
         }
         std::thread::sleep(Duration::from_micros(200));
     }
-    info!("whole-body node /{robot} stopping");
+    // On the way out the wheels stop (arms keep their goals): a wheel limb on hardware keeps
+    // its last velocity otherwise.
+    let stop = controller.hold(
+        Hold::Waiting {
+            input: "a running whole-body node".into(),
+        },
+        None,
+    );
+    publish(
+        &io,
+        &config.model,
+        &stop,
+        last_odom_stamp.unwrap_or_default(),
+        &odom_frame,
+    );
+    info!("whole-body node /{robot} stopping (wheels stopped)");
     Ok(())
 }

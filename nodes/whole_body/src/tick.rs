@@ -97,6 +97,14 @@ impl Tick {
         });
     }
 
+    /// Module `index`'s latest joint state still holds at `arrived_s` (a lazy publisher that
+    /// is alive but has nothing new: Motion Stack's `joint_read` of still joints).
+    pub fn refresh(&mut self, index: usize, arrived_s: f64) {
+        if let Some(j) = &mut self.joints[index] {
+            j.arrived_s = arrived_s;
+        }
+    }
+
     /// Decide again on the latest tick (a new target arrived while simulated time stands
     /// still, or between ticks).
     pub fn decide_again(&mut self) {
@@ -231,6 +239,11 @@ mod tests {
         assert!(
             matches!(tick.due(1.0, 0.03, 0.5), Due::Stale { age_s, .. } if age_s.is_infinite())
         );
+        // A lazy publisher alive: its last joint state holds.
+        tick.joints(0, t(1), joints(1.0), 0.0);
+        tick.base(t(2), base(), 5.0);
+        tick.refresh(0, 5.0);
+        assert!(matches!(tick.due(5.1, 0.03, 0.5), Due::Act(_)));
         tick.forget();
         assert_eq!(tick.due(2.0, 0.03, 0.5), Due::Wait);
     }
