@@ -27,10 +27,20 @@ pub struct Report {
     pub errors: Option<(f64, f64)>,
     /// Stamp [s] of the first tick the policy ran on with the current target.
     pub target_since_s: Option<f64>,
+    /// From a tick's odometry arriving to the commands computed from it being published [s]:
+    /// count, sum and largest.
+    latency: (u64, f64, f64),
     hold: Option<Hold>,
 }
 
 impl Report {
+    /// Records one decision's latency [s].
+    pub fn latency(&mut self, seconds: f64) {
+        self.latency.0 += 1;
+        self.latency.1 += seconds;
+        self.latency.2 = self.latency.2.max(seconds);
+    }
+
     /// Records one decision's hold; counts a stale hold when it begins.
     pub fn step(&mut self, hold: Option<&Hold>) {
         let was_stale = matches!(self.hold, Some(Hold::Stale { .. }));
@@ -78,6 +88,14 @@ impl Report {
         .iter()
         .map(|(k, v)| (*k, v.to_string()))
         .collect();
+        if self.latency.0 > 0 {
+            let mean_ms = 1e3 * self.latency.1 / self.latency.0 as f64;
+            values.push(("decision_latency_mean_ms", format!("{mean_ms:.2}")));
+            values.push((
+                "decision_latency_max_ms",
+                format!("{:.2}", 1e3 * self.latency.2),
+            ));
+        }
         if let Some(t) = self.target_since_s {
             values.push(("target_since_s", format!("{t:.9}")));
         }
@@ -120,6 +138,17 @@ mod tests {
         assert_eq!(s.level, DiagnosticStatus::WARN);
         assert_eq!(s.message, "holding: odometry messages are 0.70 s old");
         assert_eq!(r.stale_holds, 1);
+        r.latency(0.002);
+        r.latency(0.004);
+        let s = r.status("t");
+        assert!(s
+            .values
+            .iter()
+            .any(|kv| kv.key == "decision_latency_mean_ms" && kv.value == "3.00"));
+        assert!(s
+            .values
+            .iter()
+            .any(|kv| kv.key == "decision_latency_max_ms" && kv.value == "4.00"));
         r.errors = Some((0.1, 0.2));
         r.step(None);
         let s = r.status("t");

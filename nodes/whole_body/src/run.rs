@@ -485,6 +485,9 @@ pub fn run(
                 }
             }
         }
+        // How long ago the tick's odometry arrived, for the decision latency.
+        let odometry_age_s = tick.base_age_s(now_s).unwrap_or(0.0);
+        let decided_at = Instant::now();
         let decision = match tick.due(now_s, period_s, config.stale_after_s) {
             Due::Wait => {
                 // No odometry for too long (or none yet): hold, once per control period.
@@ -541,6 +544,9 @@ pub fn run(
                 }
             }
             publish(&io, &config.model, &decision, stamp, &odom_frame);
+            if decision.action.is_some() {
+                report.latency(odometry_age_s + decided_at.elapsed().as_secs_f64());
+            }
         }
         if report_at.elapsed() >= Duration::from_secs(1) {
             report_at = Instant::now();
