@@ -47,6 +47,10 @@ pub struct DemoArgs {
     /// The whole-body policy (default: the shipped one).
     #[arg(long)]
     pub policy: Option<PathBuf>,
+    /// The sim bridge's physics engine: rapier (default) or mujoco (built with `--features
+    /// mujoco`).
+    #[arg(long)]
+    pub engine: Option<String>,
     /// One JSON object on stdout: {robot, targets: [{target: [x, y, z, yaw], position_error_m,
     /// yaw_error_rad, seconds}], plot, csv}.
     #[arg(long)]
@@ -124,7 +128,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         morphology: args.morphology.clone(),
         robot: Some(robot.clone()),
         lockstep: true,
-        engine: None,
+        engine: args.engine.clone(),
         without: Vec::new(),
         no_whole_body: false,
         policy: args.policy.clone(),
