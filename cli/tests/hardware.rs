@@ -6,9 +6,13 @@
 
 use std::time::Duration;
 
-use kumi_tests::{distance, fresh_domain, numbers, peer, KumiProcess, ARM_GOAL};
+use kumi_tests::{distance, fresh_domain, numbers, peer, KumiProcess, ARM_GOAL, REACH_BOUND_M};
 
 const KUMI: &str = env!("CARGO_BIN_EXE_kumi");
+
+/// The tests here run one at a time: each runs several rclpy processes beside kumi's nodes on
+/// wall time, and two at once on a 2-core machine starve the fake limbs.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn number(v: &serde_json::Value) -> f64 {
     v.as_f64()
@@ -29,6 +33,7 @@ fn arm_diagnostics(domain: u16, seconds: f64) -> serde_json::Value {
 
 #[test]
 fn an_arm_node_drives_a_fake_motion_stack_limb_and_tells_a_quiet_limb_from_a_dead_one() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let domain = fresh_domain();
     let profile = std::env::temp_dir().join(format!("kumi-ms-{}.toml", std::process::id()));
     // Motion Stack calls the first joint otherwise: the profile maps it.
@@ -47,7 +52,7 @@ fn an_arm_node_drives_a_fake_motion_stack_limb_and_tells_a_quiet_limb_from_a_dea
                 "--arms",
                 "leg7_joint1,joint2,joint3,joint4,joint5,joint6,joint7",
                 "--drive-seconds",
-                "22",
+                "32",
             ],
             Duration::from_secs(60),
         )
@@ -69,6 +74,7 @@ fn an_arm_node_drives_a_fake_motion_stack_limb_and_tells_a_quiet_limb_from_a_dea
 
     // A goal: reached on wall time.
     let goal = ARM_GOAL.map(|v| v.to_string()).join(",");
+    let bound = REACH_BOUND_M.to_string();
     let out = peer(
         domain,
         &[
@@ -81,11 +87,11 @@ fn an_arm_node_drives_a_fake_motion_stack_limb_and_tells_a_quiet_limb_from_a_dea
             "--goal",
             &goal,
             "--drive-seconds",
-            "8",
+            "15",
             "--within",
-            "0.1",
+            &bound,
             "--timeout",
-            "30",
+            "40",
         ],
         Duration::from_secs(60),
     );
@@ -94,7 +100,9 @@ fn an_arm_node_drives_a_fake_motion_stack_limb_and_tells_a_quiet_limb_from_a_dea
         "reached on the fake limb: {error:.3} m in {:.1} s",
         number(&out["wall_s"])
     );
-    assert!(error < 0.1, "{out}");
+    // The fake limb is an ideal servo, not the simulator's: the skill converges more slowly on
+    // it (5-7 s here) than in simulation (1-2 s), to the bound of the simulated arm tests.
+    assert!(error < REACH_BOUND_M, "{out}");
 
     // The limb leaves: the node holds.
     let limb = limb.join().unwrap();
@@ -121,6 +129,7 @@ fn device(domain: u16, args: Vec<&'static str>) -> std::thread::JoinHandle<serde
 
 #[test]
 fn a_launch_on_hardware_drives_fake_motion_stack_limbs_from_a_target() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let domain = fresh_domain();
     let profile = std::env::temp_dir().join(format!("kumi-ms-minimal-{}.toml", std::process::id()));
     std::fs::write(

@@ -409,9 +409,11 @@ def cmd_fakelimb(args, peer):
     """A fake Motion Stack limb (MoonBot's driver) at --frame (its namespace, `/leg7`) with the
     joints --arms (comma-separated): takes absolute targets on `joint_set` (positions by name;
     velocities for wheels), moves each joint toward its target at 0.05 rad per 30 Hz tick, and
-    publishes `joint_read` as Motion Stack does: once when a subscriber appears, then only when a joint moved by
-    1e-3 rad or more (its encoder's resolution) since the last message. Runs --drive-seconds,
-    then leaves cleanly."""
+    publishes `joint_read` as Motion Stack does: once when a subscriber appears, then only when a
+    joint moved by 1e-3 rad or more (its encoder's resolution) since the last message, or came to
+    rest. Position joints follow their targets at once (an ideal servo: the test must not depend
+    on how fast this Python loop runs on a loaded machine); wheels turn at their velocities.
+    Runs --drive-seconds, then leaves cleanly."""
     ns = args.frame
     names = args.arms.split(",")
     start = [float(v) for v in args.samples.split(",")] if args.samples else [0.0] * len(names)
@@ -457,15 +459,17 @@ def cmd_fakelimb(args, peer):
         if time.monotonic() < next_tick:
             continue
         next_tick += 1.0 / 30.0
+        came_to_rest = False
         for n in names:
             before = q[n]
             if n in wheels:
                 q[n] += velocity[n] / 30.0
                 target[n] = q[n]
             else:
-                q[n] += max(-0.05, min(0.05, target[n] - q[n]))
+                q[n] = target[n]
+            came_to_rest |= moved[n] != 0.0 and q[n] == before
             moved[n] = q[n] - before
-        if any(abs(q[n] - sent[n]) >= 1e-3 for n in names):
+        if came_to_rest or any(abs(q[n] - sent[n]) >= 1e-3 for n in names):
             longest_quiet = max(longest_quiet, time.monotonic() - last_read)
             last_read = time.monotonic()
             publish()
