@@ -6,19 +6,15 @@
 
 use std::time::Duration;
 
-use kumi_tests::{distance, fresh_domain, numbers, peer, KumiProcess, ARM_GOAL, REACH_BOUND_M};
+use kumi_tests::{
+    distance, fresh_domain, number, numbers, peer, KumiProcess, ARM_GOAL, REACH_BOUND_M,
+};
 
 const KUMI: &str = env!("CARGO_BIN_EXE_kumi");
 
 /// The tests here run one at a time: each runs several rclpy processes beside kumi's nodes on
 /// wall time, and two at once on a 2-core machine starve the fake limbs.
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn number(v: &serde_json::Value) -> f64 {
-    v.as_f64()
-        .or_else(|| v.as_str().and_then(|s| s.parse().ok()))
-        .unwrap_or_else(|| panic!("not a number: {v}"))
-}
 
 /// The arm node's latest diagnostics after listening `seconds`.
 fn arm_diagnostics(domain: u16, seconds: f64) -> serde_json::Value {

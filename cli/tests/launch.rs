@@ -14,9 +14,8 @@ use std::time::Duration;
 
 use kumi_runtime::{BackendChoice, WholeBodyPolicy};
 use kumi_terms::{ActionTerms, GoalBounds};
-use kumi_tests::{fresh_domain, peer, shipped_model, KumiProcess};
-use kumi_train::body_reward::BodyWeights;
-use kumi_train::whole_body::{TaskConfig, WholeBody, WholeBodyConfig};
+use kumi_tests::{fresh_domain, number, peer, shipped_model, KumiProcess};
+use kumi_train::whole_body::WholeBody;
 use kumi_worlds::Engine;
 use nalgebra::Vector3;
 
@@ -38,12 +37,6 @@ fn launch(domain: u16, args: &[&str]) -> KumiProcess {
         launch.log()
     );
     launch
-}
-
-fn number(v: &serde_json::Value) -> f64 {
-    v.as_f64()
-        .or_else(|| v.as_str().and_then(|s| s.parse().ok()))
-        .unwrap_or_else(|| panic!("not a number: {v}"))
 }
 
 fn send_target(domain: u16, robot: &str, extra: &[&str]) -> serde_json::Value {
@@ -78,25 +71,7 @@ fn in_process_episode(hold_ticks: usize, ticks: usize) -> Vec<Vector3<f64>> {
     let bounds =
         GoalBounds::from_description(&file.metadata[kumi_terms::contract::ACTION]).unwrap();
     let skill = std::fs::read(kumi_runtime::shipped_arm_policy()).unwrap();
-    let config = WholeBodyConfig {
-        engine: Engine::Rapier,
-        task: TaskConfig {
-            episode_s: 12.0,
-            tilt_limit_rad: 0.6,
-            target_xy_m: 3.0,
-            target_z_m: [0.9, 1.5],
-            initial_xy_m: 0.5,
-        },
-        weights: BodyWeights {
-            w_p1: 1.0,
-            w_p2: 1.0,
-            w_o: 0.1,
-            w_v: 1e-4,
-            w_a: 0.005,
-            alive: 0.2,
-        },
-        bounds,
-    };
+    let config = kumi_tests::whole_body_config(Engine::Rapier, 0.6, bounds);
     let mut env = WholeBody::new(model.clone(), config, &skill, 0).unwrap();
     let terms = ActionTerms::new(&model, &bounds).unwrap();
     let expected =

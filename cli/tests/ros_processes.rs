@@ -12,8 +12,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use kumi_tests::{
-    distance, fresh_domain, numbers, peer, reach, reach_arm_goal, reach_arm_goal_in, watch_arm,
-    KumiProcess, ARM_GOAL, ARM_GOAL_2, REACH_BOUND_M,
+    distance, fresh_domain, number, numbers, peer, reach, reach_arm_goal, reach_arm_goal_in,
+    watch_arm, KumiProcess, ARM_GOAL, ARM_GOAL_2, REACH_BOUND_M,
 };
 
 const KUMI: &str = env!("CARGO_BIN_EXE_kumi");
@@ -43,12 +43,6 @@ fn arm_node(prefix: &[&str], domain: u16) -> KumiProcess {
     let node = KumiProcess::spawn(KUMI, prefix, &["arm", "arm"], domain);
     assert!(node.wait_for_log("arm node up", START), "{}", node.log());
     node
-}
-
-fn number(v: &serde_json::Value) -> f64 {
-    v.as_f64()
-        .or_else(|| v.as_str().and_then(|s| s.parse().ok()))
-        .unwrap_or_else(|| panic!("not a number: {v}"))
 }
 
 /// Sends [`ARM_GOAL_2`] after a restart (the arm stood at [`ARM_GOAL`], or at home in a new

@@ -317,6 +317,42 @@ pub fn distance(a: &[f64], b: &[f64]) -> f64 {
     (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
 }
 
+/// A whole-body environment's settings for tests that only need a robot, an engine, goal
+/// bounds and a tilt limit: Table IV's terms with the shipped configs' weights, 12 s episodes,
+/// the training ranges of start and target.
+pub fn whole_body_config(
+    engine: kumi_worlds::Engine,
+    tilt_limit_rad: f64,
+    bounds: kumi_terms::GoalBounds,
+) -> kumi_train::whole_body::WholeBodyConfig {
+    kumi_train::whole_body::WholeBodyConfig {
+        engine,
+        task: kumi_train::whole_body::TaskConfig {
+            episode_s: 12.0,
+            tilt_limit_rad,
+            target_xy_m: 3.0,
+            target_z_m: [0.9, 1.5],
+            initial_xy_m: 0.5,
+        },
+        weights: kumi_train::body_reward::BodyWeights {
+            w_p1: 1.0,
+            w_p2: 1.0,
+            w_o: 0.1,
+            w_v: 1e-4,
+            w_a: 0.005,
+            alive: 0.2,
+        },
+        bounds,
+    }
+}
+
+/// A JSON number, or a string holding one (`/diagnostics` values are strings).
+pub fn number(v: &serde_json::Value) -> f64 {
+    v.as_f64()
+        .or_else(|| v.as_str().and_then(|s| s.parse().ok()))
+        .unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
 /// The numbers of a JSON array.
 pub fn numbers(v: &serde_json::Value) -> Vec<f64> {
     v.as_array()

@@ -9,8 +9,7 @@ use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
 use kumi_msgs::builtin_interfaces::Time;
 use kumi_sim_bridge::state;
 use kumi_terms::{ActionTerms, GoalBounds};
-use kumi_train::body_reward::BodyWeights;
-use kumi_train::whole_body::{TaskConfig, WholeBody, WholeBodyConfig};
+use kumi_train::whole_body::WholeBody;
 use kumi_whole_body_node::tick::{ModuleState, Snapshot};
 use kumi_whole_body_node::WholeBodyController;
 use kumi_worlds::Engine;
@@ -31,25 +30,7 @@ const BOUNDS: GoalBounds = GoalBounds {
 };
 
 fn env(model: Arc<RobotModel>, engine: Engine) -> WholeBody {
-    let config = WholeBodyConfig {
-        engine,
-        task: TaskConfig {
-            episode_s: 12.0,
-            tilt_limit_rad: 3.0,
-            target_xy_m: 3.0,
-            target_z_m: [0.9, 1.5],
-            initial_xy_m: 0.5,
-        },
-        weights: BodyWeights {
-            w_p1: 1.0,
-            w_p2: 1.0,
-            w_o: 0.1,
-            w_v: 1e-4,
-            w_a: 0.005,
-            alive: 0.2,
-        },
-        bounds: BOUNDS,
-    };
+    let config = kumi_tests::whole_body_config(engine, 3.0, BOUNDS);
     let skill = std::fs::read(kumi_runtime::shipped_arm_policy()).unwrap();
     WholeBody::new(model, config, &skill, 3).unwrap()
 }
