@@ -138,16 +138,17 @@ pub fn run(args: DemoArgs) -> Result<()> {
         profile: None,
     };
     launch::check_policy(&model, &launch_args)?;
-    let range = match crate::train::read_body_config(None, &robot) {
-        Ok(c) => TargetRange {
-            xy_m: c.task.target_xy_m,
-            z_m: c.task.target_z_m,
-        },
-        Err(_) => TargetRange {
-            xy_m: 3.0,
-            z_m: [0.9, 1.5],
-        },
-    };
+    let range =
+        match crate::train::read_body_config(None, &robot, crate::train::Variant::Hierarchical) {
+            Ok(c) => TargetRange {
+                xy_m: c.task.target_xy_m,
+                z_m: c.task.target_z_m,
+            },
+            Err(_) => TargetRange {
+                xy_m: 3.0,
+                z_m: [0.9, 1.5],
+            },
+        };
     let targets = draw_targets(args.targets, args.seed, &range);
     let out = args
         .out

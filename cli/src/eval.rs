@@ -27,11 +27,15 @@ pub enum EvalCommand {
 pub struct EvalBodyArgs {
     /// `minimal`, `dragon`, `tricycle`, or a path to a morphology file.
     pub morphology: String,
-    /// The ONNX policy (default: the shipped policies/<robot>_whole_body.onnx).
+    /// Which policy: over the skill, or a baseline (picks the default policy and config).
+    #[arg(long, value_enum, default_value_t)]
+    pub variant: crate::train::Variant,
+    /// The ONNX policy (default: the shipped one of the variant, e.g.
+    /// policies/<robot>_whole_body.onnx or policies/<robot>_flat.onnx).
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// The training config the policy was trained with (task and action bounds; default:
-    /// the shipped one for the robot).
+    /// the shipped one for the robot and variant).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// The frozen skill (default: the shipped policies/arm_reach.onnx).
@@ -72,20 +76,54 @@ fn shown(path: &std::path::Path) -> String {
 }
 
 fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
+    let results = evaluate_whole_body(&args)?;
+    if args.json {
+        match results.evaluations.as_slice() {
+            [one] => println!("{}", serde_json::to_string(one)?),
+            many => println!("{}", serde_json::to_string(many)?),
+        }
+    } else {
+        print!("{}", results.markdown());
+    }
+    Ok(())
+}
+
+/// A whole-body policy's evaluations, one per engine, with what a report says about them.
+pub struct BodyEvaluations {
+    pub evaluations: Vec<kumi_train::evaluate_body::BodyEvaluation>,
+    /// The report's header: policy, steps, protocol, backend.
+    pub header: String,
+    /// Environment steps the policy was trained for (from its metadata; `?` if absent).
+    pub steps: String,
+}
+
+impl BodyEvaluations {
+    pub fn markdown(&self) -> String {
+        let mut text = self.header.clone();
+        for result in &self.evaluations {
+            text.push('\n');
+            text.push_str(&result.markdown());
+        }
+        text
+    }
+}
+
+/// Evaluates the policy `args` names in each of its engines.
+pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
     anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
     let model = load_model(&args.morphology)?;
-    let file = crate::train::read_body_config(args.config.as_deref(), &model.name)?;
+    let file = crate::train::read_body_config(args.config.as_deref(), &model.name, args.variant)?;
     let path = args
         .policy
         .clone()
-        .unwrap_or_else(|| kumi_runtime::shipped_whole_body_policy(&model.name));
+        .unwrap_or_else(|| args.variant.shipped_policy(&model.name));
     let skill_path = args
         .skill
         .clone()
         .unwrap_or_else(kumi_runtime::shipped_arm_policy);
     let skill = std::fs::read(&skill_path)
         .with_context(|| format!("reading the skill {}", skill_path.display()))?;
-    let terms = kumi_terms::ActionTerms::new(&model, &file.action)?;
+    let terms = file.arms()?.terms(&model)?;
     let control_hz = kumi_worlds::SimConfig::for_model(&model).control_hz;
     let expected = kumi_terms::contract::contract(&model, &terms, &skill, control_hz);
     let probe = WholeBodyPolicy::load(&path, &expected, args.backend)?;
@@ -113,12 +151,7 @@ fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
             args.rollouts
         );
         let start = Instant::now();
-        let config = kumi_train::whole_body::WholeBodyConfig {
-            engine,
-            task: file.task,
-            weights: file.reward,
-            bounds: file.action,
-        };
+        let config = file.environment(engine)?;
         let result = kumi_train::evaluate_body::evaluate_body(
             model.clone(),
             config,
@@ -135,30 +168,29 @@ fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
         eprintln!("done in {:.1} s", start.elapsed().as_secs_f64());
         results.push(result);
     }
-    if args.json {
-        match results.as_slice() {
-            [one] => println!("{}", serde_json::to_string(one)?),
-            many => println!("{}", serde_json::to_string(many)?),
-        }
-    } else {
-        println!(
-            "# {} whole-body policy: evaluation\n\n- policy: `{}` (trained for {steps} environment steps), skill `{}`\n- protocol: {} episodes of {} s from a random start pose (x, y within +-{} m, any heading) to a random target (x, y within +-{} m, z in [{}, {}] m, any yaw); errors at the episode's end, over episodes that did not fall; episode seed {}\n- inference: {backend} backend",
-            model.name,
-            shown(&path),
-            shown(&skill_path),
-            args.rollouts,
-            file.task.episode_s,
-            file.task.initial_xy_m,
-            file.task.target_xy_m,
-            file.task.target_z_m[0],
-            file.task.target_z_m[1],
-            args.seed,
-        );
-        for result in &results {
-            print!("\n{}", result.markdown());
-        }
-    }
-    Ok(())
+    let header = format!(
+        "# {} {} whole-body policy: evaluation\n\n- policy: `{}` (trained for {steps} environment steps){}\n- protocol: {} episodes of {} s from a random start pose (x, y within +-{} m, any heading) to a random target (x, y within +-{} m, z in [{}, {}] m, any yaw); errors at the episode's end, over episodes that did not fall; episode seed {}\n- inference: {backend} backend\n",
+        model.name,
+        args.variant,
+        shown(&path),
+        if terms.uses_skill() {
+            format!(", skill `{}`", shown(&skill_path))
+        } else {
+            String::new()
+        },
+        args.rollouts,
+        file.task.episode_s,
+        file.task.initial_xy_m,
+        file.task.target_xy_m,
+        file.task.target_z_m[0],
+        file.task.target_z_m[1],
+        args.seed,
+    );
+    Ok(BodyEvaluations {
+        evaluations: results,
+        header,
+        steps,
+    })
 }
 
 #[derive(Args, Debug)]

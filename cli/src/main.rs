@@ -4,6 +4,7 @@ mod arm;
 mod bench;
 mod bench_learn;
 mod bridge;
+mod compare;
 mod demo;
 mod engine;
 mod eval;

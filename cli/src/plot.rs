@@ -145,6 +145,256 @@ pub fn top_down(title: &str, paths: &[Path], marks: &[Mark]) -> String {
     svg
 }
 
+/// One box of a box plot: quartiles, whiskers at the 5th and 95th percentiles, the mean.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoxStats {
+    pub p5: f64,
+    pub q1: f64,
+    pub median: f64,
+    pub q3: f64,
+    pub p95: f64,
+    pub mean: f64,
+}
+
+impl BoxStats {
+    /// The statistics of `values` (non-finite ones dropped); none when nothing is left.
+    pub fn of(values: &[f64]) -> Option<Self> {
+        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        // Linear interpolation between closest ranks.
+        let q = |p: f64| {
+            let at = p * (v.len() - 1) as f64;
+            let (lo, hi) = (at.floor() as usize, at.ceil() as usize);
+            v[lo] + (v[hi] - v[lo]) * (at - lo as f64)
+        };
+        Some(Self {
+            p5: q(0.05),
+            q1: q(0.25),
+            median: q(0.5),
+            q3: q(0.75),
+            p95: q(0.95),
+            mean: v.iter().sum::<f64>() / v.len() as f64,
+        })
+    }
+}
+
+/// A group of boxes side by side under one label (a morphology), each box a series (a
+/// policy) with its legend colour; a missing box leaves its slot empty.
+pub struct BoxGroup {
+    pub label: String,
+    pub boxes: Vec<Option<BoxStats>>,
+}
+
+/// A series of a chart: its legend label and colour.
+pub struct Series {
+    pub label: String,
+    pub colour: &'static str,
+}
+
+const CHART_W_PX: f64 = 720.0;
+const CHART_H_PX: f64 = 420.0;
+
+/// A chart's frame: title, axes, y grid and labels, legend. Returns the SVG opened (close it
+/// with `</svg>`) and the function from a y value to its pixel row.
+fn chart_frame(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    y_max: f64,
+    series: &[Series],
+) -> (String, impl Fn(f64) -> f64) {
+    let (top, bottom) = (40.0, CHART_H_PX - 48.0);
+    let y_max = if y_max.is_finite() && y_max > 0.0 {
+        y_max
+    } else {
+        1.0
+    };
+    let y_px = move |v: f64| bottom - (v.clamp(0.0, y_max) / y_max) * (bottom - top);
+    let mut svg = String::new();
+    let _ = writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{CHART_W_PX}" height="{CHART_H_PX}" viewBox="0 0 {CHART_W_PX} {CHART_H_PX}" font-family="sans-serif" font-size="12">"#
+    );
+    let _ = writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#);
+    let _ = writeln!(
+        svg,
+        r#"<text x="{}" y="20" text-anchor="middle" font-size="14">{}</text>"#,
+        CHART_W_PX / 2.0,
+        escape(title)
+    );
+    let step = nice_step(y_max / 5.0);
+    let mut g = 0.0;
+    while g <= y_max + 1e-12 {
+        let y = y_px(g);
+        let _ = writeln!(
+            svg,
+            r##"<line x1="{MARGIN_PX}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
+            CHART_W_PX - 16.0,
+            MARGIN_PX - 6.0,
+            y + 4.0,
+            format_tick(g)
+        );
+        g += step;
+    }
+    let _ = writeln!(
+        svg,
+        r#"<text x="{}" y="{}" text-anchor="middle">{}</text><text x="14" y="{}" transform="rotate(-90 14 {})" text-anchor="middle">{}</text>"#,
+        CHART_W_PX / 2.0,
+        CHART_H_PX - 8.0,
+        escape(x_label),
+        CHART_H_PX / 2.0,
+        CHART_H_PX / 2.0,
+        escape(y_label)
+    );
+    for (i, s) in series.iter().enumerate() {
+        let x = CHART_W_PX - 180.0;
+        let y = top + 6.0 + 16.0 * i as f64;
+        let _ = writeln!(
+            svg,
+            r#"<rect x="{x:.1}" y="{:.1}" width="14" height="10" fill="{}"/><text x="{:.1}" y="{:.1}">{}</text>"#,
+            y - 9.0,
+            s.colour,
+            x + 20.0,
+            y,
+            escape(&s.label)
+        );
+    }
+    (svg, y_px)
+}
+
+/// A round grid step near `raw` (1, 2 or 5 times a power of ten).
+fn nice_step(raw: f64) -> f64 {
+    if !(raw.is_finite() && raw > 0.0) {
+        return 1.0;
+    }
+    let power = 10f64.powf(raw.log10().floor());
+    let m = raw / power;
+    power
+        * if m <= 1.0 {
+            1.0
+        } else if m <= 2.0 {
+            2.0
+        } else if m <= 5.0 {
+            5.0
+        } else {
+            10.0
+        }
+}
+
+fn format_tick(v: f64) -> String {
+    if v != 0.0 && (v.abs() >= 1e5 || v.abs() < 1e-3) {
+        format!("{v:.0e}")
+    } else {
+        format!("{}", (v * 1e6).round() / 1e6)
+    }
+}
+
+/// A box plot as SVG: per group (x axis) one box per series, whiskers at the 5th and 95th
+/// percentiles, a line at the median and a dot at the mean; the y axis from 0 to the largest
+/// whisker.
+pub fn box_plot(title: &str, y_label: &str, series: &[Series], groups: &[BoxGroup]) -> String {
+    let y_max = groups
+        .iter()
+        .flat_map(|g| g.boxes.iter().flatten())
+        .map(|b| b.p95.max(b.mean))
+        .fold(0.0, f64::max)
+        * 1.1;
+    let (mut svg, y_px) = chart_frame(title, "", y_label, y_max, series);
+    let width = (CHART_W_PX - MARGIN_PX - 200.0) / groups.len().max(1) as f64;
+    let slot = width / (series.len().max(1) as f64 + 1.0);
+    for (gi, group) in groups.iter().enumerate() {
+        let left = MARGIN_PX + gi as f64 * width;
+        let _ = writeln!(
+            svg,
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text>"#,
+            left + width / 2.0,
+            CHART_H_PX - 30.0,
+            escape(&group.label)
+        );
+        for (si, b) in group.boxes.iter().enumerate() {
+            let Some(b) = b else { continue };
+            let colour = series.get(si).map_or("#333", |s| s.colour);
+            let cx = left + slot * (si as f64 + 1.0);
+            let half = slot * 0.35;
+            let _ = writeln!(
+                svg,
+                r##"<line x1="{cx:.1}" y1="{:.1}" x2="{cx:.1}" y2="{:.1}" stroke="#333"/><rect x="{:.1}" y="{:.1}" width="{:.1}" height="{:.1}" fill="{colour}" fill-opacity="0.6" stroke="#333"/><line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#000" stroke-width="2"/><circle cx="{cx:.1}" cy="{:.1}" r="3" fill="#000"/>"##,
+                y_px(b.p5),
+                y_px(b.p95),
+                cx - half,
+                y_px(b.q3),
+                2.0 * half,
+                (y_px(b.q1) - y_px(b.q3)).max(1.0),
+                cx - half,
+                y_px(b.median),
+                cx + half,
+                y_px(b.median),
+                y_px(b.mean),
+            );
+        }
+    }
+    svg.push_str("</svg>\n");
+    svg
+}
+
+/// A line chart as SVG: each series' points (x, y), x from 0 to the largest x, y from 0 to
+/// the largest y (or `y_max` when given); non-finite points are skipped.
+pub fn line_plot(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[(Series, Vec<[f64; 2]>)],
+    y_max: Option<f64>,
+) -> String {
+    let finite = || {
+        series
+            .iter()
+            .flat_map(|(_, p)| p.iter())
+            .filter(|p| p[0].is_finite() && p[1].is_finite())
+    };
+    let x_max = finite().map(|p| p[0]).fold(0.0, f64::max).max(1e-9);
+    let y_max = y_max.unwrap_or_else(|| finite().map(|p| p[1]).fold(0.0, f64::max) * 1.05);
+    let legend: Vec<Series> = series
+        .iter()
+        .map(|(s, _)| Series {
+            label: s.label.clone(),
+            colour: s.colour,
+        })
+        .collect();
+    let (mut svg, y_px) = chart_frame(title, x_label, y_label, y_max, &legend);
+    let x_px = |x: f64| MARGIN_PX + x / x_max * (CHART_W_PX - MARGIN_PX - 200.0);
+    let step = nice_step(x_max / 5.0);
+    let mut g = 0.0;
+    while g <= x_max + 1e-9 {
+        let _ = writeln!(
+            svg,
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text>"#,
+            x_px(g),
+            CHART_H_PX - 30.0,
+            format_tick(g)
+        );
+        g += step;
+    }
+    for (s, points) in series {
+        let points: Vec<String> = points
+            .iter()
+            .filter(|p| p[0].is_finite() && p[1].is_finite())
+            .map(|p| format!("{:.1},{:.1}", x_px(p[0]), y_px(p[1])))
+            .collect();
+        let _ = writeln!(
+            svg,
+            r#"<polyline fill="none" stroke="{}" stroke-width="2" points="{}"/>"#,
+            s.colour,
+            points.join(" ")
+        );
+    }
+    svg.push_str("</svg>\n");
+    svg
+}
+
 fn escape(text: &str) -> String {
     text.replace('&', "&amp;")
         .replace('<', "&lt;")
@@ -184,5 +434,83 @@ mod tests {
         );
         assert!(numbers.iter().all(|&v| (0.0..=SIZE_PX).contains(&v)));
         assert!(svg.contains("<circle"));
+    }
+
+    #[test]
+    fn box_statistics_by_hand() {
+        // 0..=100: quartiles at 25 and 75, whiskers at 5 and 95, mean 50; NaN dropped.
+        let mut v: Vec<f64> = (0..=100).map(f64::from).collect();
+        v.push(f64::NAN);
+        let b = BoxStats::of(&v).unwrap();
+        assert_eq!(
+            (b.p5, b.q1, b.median, b.q3, b.p95, b.mean),
+            (5.0, 25.0, 50.0, 75.0, 95.0, 50.0)
+        );
+        assert_eq!(BoxStats::of(&[f64::NAN]), None);
+        // Interpolated between ranks: [1, 2] has its median at 1.5.
+        assert_eq!(BoxStats::of(&[2.0, 1.0]).unwrap().median, 1.5);
+    }
+
+    #[test]
+    fn charts_draw_every_box_and_line_inside_the_frame() {
+        let series = || {
+            vec![
+                Series {
+                    label: "hierarchical".into(),
+                    colour: "#1f77b4",
+                },
+                Series {
+                    label: "flat".into(),
+                    colour: "#ff7f0e",
+                },
+            ]
+        };
+        let stats = BoxStats::of(&[0.1, 0.2, 0.3, 0.4]);
+        let svg = box_plot(
+            "errors",
+            "position error [m]",
+            &series(),
+            &[
+                BoxGroup {
+                    label: "minimal".into(),
+                    boxes: vec![stats, stats],
+                },
+                BoxGroup {
+                    label: "tricycle".into(),
+                    boxes: vec![None, stats],
+                },
+            ],
+        );
+        assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
+        assert_eq!(
+            svg.matches("fill-opacity").count(),
+            3,
+            "one box per present series"
+        );
+        assert!(svg.contains(">tricycle<") && svg.contains(">flat<"));
+        let lines = line_plot(
+            "learning",
+            "env steps",
+            "reward",
+            &[
+                (
+                    series().remove(0),
+                    vec![[0.0, 0.1], [1e6, 0.5], [2e6, f64::NAN]],
+                ),
+                (series().remove(1), vec![[0.0, 0.0], [5e5, 0.9]]),
+            ],
+            None,
+        );
+        assert_eq!(lines.matches("<polyline").count(), 2);
+        for line in lines.lines().filter(|l| l.starts_with("<polyline")) {
+            let numbers: Vec<f64> = line
+                .split(['"', ' ', ','])
+                .filter_map(|t| t.parse().ok())
+                .collect();
+            assert!(
+                numbers.iter().all(|&v| (0.0..=CHART_W_PX).contains(&v)),
+                "{line}"
+            );
+        }
     }
 }

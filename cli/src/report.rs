@@ -24,6 +24,9 @@ use rayon::prelude::*;
 pub enum ReportCommand {
     /// Each arm module's goal bounds against the skill's training goals.
     GoalBounds(GoalBoundsArgs),
+    /// The paper's comparison: every shipped hierarchical, flat and penalty policy evaluated
+    /// side by side, with box plots, Table VI and learning curves (writes reports/compare).
+    Compare(crate::compare::CompareArgs),
 }
 
 #[derive(Args)]
@@ -48,6 +51,7 @@ pub struct GoalBoundsArgs {
 pub fn run(command: ReportCommand) -> Result<()> {
     match command {
         ReportCommand::GoalBounds(args) => goal_bounds(args),
+        ReportCommand::Compare(args) => crate::compare::run(args),
     }
 }
 
@@ -123,9 +127,10 @@ fn goal_bounds(args: GoalBoundsArgs) -> Result<()> {
     let reference = args.samples * 10;
     let mut rows = Vec::new();
     for robot in &args.morphologies {
-        let config = crate::train::read_body_config(None, robot)?;
+        let config =
+            crate::train::read_body_config(None, robot, crate::train::Variant::Hierarchical)?;
         let model = assemble(&load_morphology(robot, &library)?, &library);
-        let terms = ActionTerms::new(&model, &config.action)
+        let terms = ActionTerms::new(&model, &config.goal_bounds()?)
             .with_context(|| format!("the action terms of {robot}"))?;
         for term in terms.arms() {
             let home: Vec<f64> = model

@@ -7,13 +7,13 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use kumi_terms::action::GoalBounds;
+use kumi_terms::action::{GoalBounds, JointBounds};
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig};
-use kumi_train::body_reward::BodyWeights;
+use kumi_train::body_reward::{BodyWeights, PenaltyWeights};
 use kumi_train::env::Environment;
 use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
 use kumi_train::reward::ReachWeights;
-use kumi_train::whole_body::{TaskConfig, WholeBody, WholeBodyConfig};
+use kumi_train::whole_body::{ArmControl, TaskConfig, WholeBody, WholeBodyConfig};
 
 /// The training config file: PPO hyperparameters, the reward's weights and the goals.
 #[derive(Debug, serde::Deserialize, serde::Serialize)]
@@ -94,7 +94,12 @@ pub struct TrainBodyArgs {
     /// The frozen skill every arm module runs (default: the shipped policies/arm_reach.onnx).
     #[arg(long)]
     pub skill: Option<PathBuf>,
-    /// Where metrics, checkpoints and the policy go (default: runs/<robot>_whole_body).
+    /// The policy to train: over the skill, or a baseline (its default config is
+    /// train/configs/{whole_body,flat,penalty}/<morphology>.toml).
+    #[arg(long, value_enum, default_value_t)]
+    pub variant: Variant,
+    /// Where metrics, checkpoints and the policy go (default: runs/<policy name>, e.g.
+    /// runs/minimal_whole_body or runs/minimal_flat).
     #[arg(long)]
     pub out: Option<PathBuf>,
     #[command(flatten)]
@@ -108,47 +113,169 @@ const LOG_EVERY: usize = 5;
 
 const SHIPPED_CONFIG: &str = include_str!("../../train/configs/arm_reach.toml");
 
-/// The shipped whole-body configs, by robot name.
-pub const SHIPPED_BODY_CONFIGS: [(&str, &str); 3] = [
+/// Which whole-body policy: the paper's hierarchical one over the frozen skill, or a
+/// baseline of section V-C.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Variant {
+    /// Goals for the frozen skill per arm module, velocities per wheel module.
+    #[default]
+    Hierarchical,
+    /// Every arm joint's position target directly (SPEC section 6).
+    Flat,
+    /// Flat, with the leg-orientation reward and contact penalty (Eqs. 5, 6).
+    Penalty,
+}
+
+impl Variant {
+    /// The policy's name: `<robot>_whole_body`, `<robot>_flat` or `<robot>_penalty` (its file
+    /// in `policies/`, its run directory under `runs/`).
+    pub fn policy_name(self, robot: &str) -> String {
+        match self {
+            Variant::Hierarchical => format!("{robot}_whole_body"),
+            Variant::Flat => format!("{robot}_flat"),
+            Variant::Penalty => format!("{robot}_penalty"),
+        }
+    }
+
+    /// The shipped policy file of this variant for `robot`.
+    pub fn shipped_policy(self, robot: &str) -> PathBuf {
+        kumi_runtime::shipped_arm_policy()
+            .with_file_name(format!("{}.onnx", self.policy_name(robot)))
+    }
+
+    fn config_dir(self) -> &'static str {
+        match self {
+            Variant::Hierarchical => "whole_body",
+            Variant::Flat => "flat",
+            Variant::Penalty => "penalty",
+        }
+    }
+}
+
+impl std::fmt::Display for Variant {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Variant::Hierarchical => "hierarchical",
+            Variant::Flat => "flat",
+            Variant::Penalty => "penalty",
+        })
+    }
+}
+
+/// The shipped whole-body configs, by robot name and variant.
+pub const SHIPPED_BODY_CONFIGS: [(&str, Variant, &str); 7] = [
     (
         "minimal",
+        Variant::Hierarchical,
         include_str!("../../train/configs/whole_body/minimal.toml"),
     ),
     (
         "dragon",
+        Variant::Hierarchical,
         include_str!("../../train/configs/whole_body/dragon.toml"),
     ),
     (
         "tricycle",
+        Variant::Hierarchical,
         include_str!("../../train/configs/whole_body/tricycle.toml"),
+    ),
+    (
+        "minimal",
+        Variant::Flat,
+        include_str!("../../train/configs/flat/minimal.toml"),
+    ),
+    (
+        "dragon",
+        Variant::Flat,
+        include_str!("../../train/configs/flat/dragon.toml"),
+    ),
+    (
+        "tricycle",
+        Variant::Flat,
+        include_str!("../../train/configs/flat/tricycle.toml"),
+    ),
+    (
+        "tricycle",
+        Variant::Penalty,
+        include_str!("../../train/configs/penalty/tricycle.toml"),
     ),
 ];
 
-/// The whole-body training config file.
+/// The whole-body training config file: `[action]` (goal bounds, over the skill) or `[flat]`
+/// (joint targets), and for the penalty baseline `[penalty]`.
 #[derive(Debug, Clone, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrainBodyConfig {
     pub ppo: PpoConfig,
     pub task: TaskConfig,
     pub reward: BodyWeights,
-    pub action: GoalBounds,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub action: Option<GoalBounds>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flat: Option<JointBounds>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub penalty: Option<PenaltyWeights>,
 }
 
-/// The whole-body config at `path`, or the one shipped for `robot`.
-pub fn read_body_config(path: Option<&std::path::Path>, robot: &str) -> Result<TrainBodyConfig> {
+impl TrainBodyConfig {
+    /// How the policy drives the arms: exactly one of `[action]` and `[flat]`.
+    pub fn arms(&self) -> Result<ArmControl> {
+        match (self.action, self.flat) {
+            (Some(bounds), None) => Ok(ArmControl::Skill(bounds)),
+            (None, Some(bounds)) => Ok(ArmControl::Joints(bounds)),
+            (Some(_), Some(_)) => bail!("the config has both [action] (goals for the skill) and [flat] (joint targets): keep one"),
+            (None, None) => bail!("the config has neither [action] (goals for the skill) nor [flat] (joint targets)"),
+        }
+    }
+
+    /// The environment's settings in `engine`.
+    pub fn environment(&self, engine: kumi_worlds::Engine) -> Result<WholeBodyConfig> {
+        Ok(WholeBodyConfig {
+            engine,
+            task: self.task,
+            weights: self.reward,
+            penalty: self.penalty.unwrap_or_default(),
+            arms: self.arms()?,
+        })
+    }
+
+    /// The goal bounds over the skill (an error for a flat config).
+    pub fn goal_bounds(&self) -> Result<GoalBounds> {
+        match self.arms()? {
+            ArmControl::Skill(bounds) => Ok(bounds),
+            ArmControl::Joints(_) => {
+                bail!("a flat baseline config has no goal bounds for the skill")
+            }
+        }
+    }
+}
+
+/// The whole-body config at `path`, or the one shipped for `robot` and `variant`.
+pub fn read_body_config(
+    path: Option<&std::path::Path>,
+    robot: &str,
+    variant: Variant,
+) -> Result<TrainBodyConfig> {
     let (text, label) = match path {
         Some(path) => (
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?,
             path.display().to_string(),
         ),
-        None => match SHIPPED_BODY_CONFIGS.iter().find(|(name, _)| *name == robot) {
-            Some((_, text)) => (text.to_string(), format!("the shipped config for {robot}")),
+        None => match SHIPPED_BODY_CONFIGS
+            .iter()
+            .find(|(name, v, _)| *name == robot && *v == variant)
+        {
+            Some((_, _, text)) => (text.to_string(), format!("the shipped {variant} config for {robot}")),
             None => bail!(
-                "no shipped whole-body config for robot `{robot}`: pass --config FILE (start from train/configs/whole_body/tricycle.toml)"
+                "no shipped {variant} whole-body config for robot `{robot}`: pass --config FILE (start from train/configs/{}/tricycle.toml)",
+                variant.config_dir()
             ),
         },
     };
-    toml::from_str(&text).with_context(|| format!("parsing {label}"))
+    let config: TrainBodyConfig =
+        toml::from_str(&text).with_context(|| format!("parsing {label}"))?;
+    config.arms().with_context(|| format!("in {label}"))?;
+    Ok(config)
 }
 
 /// The generic columns of metrics.csv; the environment's own metrics follow, then `wall_s`.
@@ -443,7 +570,7 @@ fn train_arm(args: TrainArmArgs) -> Result<()> {
 
 fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
     let model = load_model(&args.morphology)?;
-    let file = read_body_config(args.config.as_deref(), &model.name)?;
+    let file = read_body_config(args.config.as_deref(), &model.name, args.variant)?;
     let mut config = file.ppo.clone();
     prepare(&mut config, &args.run)?;
     let trained = TrainBodyConfig {
@@ -457,12 +584,7 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
     let skill = std::fs::read(&skill_path)
         .with_context(|| format!("reading the skill {}", skill_path.display()))?;
     let engine = training_engine(&args.run)?;
-    let body = WholeBodyConfig {
-        engine,
-        task: file.task,
-        weights: file.reward,
-        bounds: file.action,
-    };
+    let body = file.environment(engine)?;
     let envs = (0..config.num_envs)
         .map(|i| {
             WholeBody::new(
@@ -481,14 +603,19 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
         kumi_policies::metadata::fingerprint(&serde_json::to_string(&trained)?),
     );
     eprintln!(
-        "{}: {} observations, {} actions ({}); skill {}",
+        "{} ({}): {} observations, {} actions ({}); {}",
         model.name,
+        args.variant,
         envs[0].observation_dim(),
         envs[0].terms().size(),
         envs[0].terms().describe(),
-        skill_path.display()
+        if envs[0].terms().uses_skill() {
+            format!("skill {}", skill_path.display())
+        } else {
+            "no skill: arm joints commanded directly".into()
+        }
     );
-    let name = format!("{}_whole_body", model.name);
+    let name = args.variant.policy_name(&model.name);
     let out = args
         .out
         .clone()
@@ -503,4 +630,38 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
         &name,
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_shipped_whole_body_config_parses_as_its_variant() {
+        for (robot, variant, _) in SHIPPED_BODY_CONFIGS {
+            let config = read_body_config(None, robot, variant).unwrap();
+            let arms = config.arms().unwrap();
+            match variant {
+                Variant::Hierarchical => assert!(matches!(arms, ArmControl::Skill(_))),
+                _ => assert!(matches!(arms, ArmControl::Joints(_)), "{robot} {variant}"),
+            }
+            assert_eq!(config.penalty.is_some(), variant == Variant::Penalty);
+        }
+        let err = read_body_config(None, "dragon", Variant::Penalty).unwrap_err();
+        assert!(err.to_string().contains("no shipped penalty"), "{err}");
+    }
+
+    #[test]
+    fn a_config_with_both_or_neither_arm_control_is_refused() {
+        let (_, _, flat) = SHIPPED_BODY_CONFIGS[3];
+        let both = format!("{flat}\n[action]\nmanipulator_position_m = 0.25\nmanipulator_rotation_rad = 0.5\nleg_position_m = 0.1\nleg_roll_rad = 0.5\n");
+        let config: TrainBodyConfig = toml::from_str(&both).unwrap();
+        assert!(config.arms().unwrap_err().to_string().contains("both"));
+        let neither = flat
+            .replace("[flat]", "[unused]")
+            .replace("joint_scale_rad = 0.5", "");
+        let neither = &neither[..neither.find("[unused]").unwrap()];
+        let config: TrainBodyConfig = toml::from_str(neither).unwrap();
+        assert!(config.arms().unwrap_err().to_string().contains("neither"));
+    }
 }

@@ -184,7 +184,7 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
     let progress = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{progress}");
     assert!(
-        progress.contains("minimal: 19 observations, 7 actions"),
+        progress.contains("minimal (hierarchical): 19 observations, 7 actions"),
         "{progress}"
     );
     let csv = std::fs::read_to_string(out_dir.join("metrics.csv")).unwrap();
@@ -236,6 +236,64 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
     assert!(!wrong.status.success());
     assert!(
         err.contains("kumi.morphology") && err.contains("`minimal`") && err.contains("`dragon`"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&out_dir).unwrap();
+}
+
+#[test]
+fn the_flat_baseline_trains_evaluates_and_is_not_taken_for_a_policy_over_the_skill() {
+    let out_dir = std::env::temp_dir().join(format!("kumi-train-flat-{}", std::process::id()));
+    let out = kumi(&[
+        "train",
+        "whole-body",
+        "minimal",
+        "--variant",
+        "flat",
+        "--steps",
+        "4096",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    let progress = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{progress}");
+    // 10 + 2 wheel velocities + 8 previous actions + 7 joint angles + 7 joint velocities.
+    assert!(
+        progress.contains("minimal (flat): 34 observations, 8 actions")
+            && progress.contains("no skill"),
+        "{progress}"
+    );
+    let policy = out_dir.join("minimal_flat.onnx");
+    let eval = |variant: &str| {
+        kumi(&[
+            "eval",
+            "whole-body",
+            "minimal",
+            "--variant",
+            variant,
+            "--policy",
+            policy.to_str().unwrap(),
+            "--rollouts",
+            "2",
+            "--backend",
+            "tract",
+            "--json",
+        ])
+    };
+    let flat = eval("flat");
+    assert!(
+        flat.status.success(),
+        "{}",
+        String::from_utf8_lossy(&flat.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&flat.stdout).unwrap();
+    assert_eq!(v["rollouts"], 2);
+    // Evaluated as a policy over the skill, it is refused by the key that differs first.
+    let wrong = eval("hierarchical");
+    let err = String::from_utf8_lossy(&wrong.stderr);
+    assert!(!wrong.status.success());
+    assert!(
+        err.contains("kumi.skill_fingerprint") && err.contains("`none`"),
         "{err}"
     );
     std::fs::remove_dir_all(&out_dir).unwrap();

@@ -342,7 +342,8 @@ pub fn whole_body_config(
             w_a: 0.005,
             alive: 0.2,
         },
-        bounds,
+        penalty: Default::default(),
+        arms: kumi_train::whole_body::ArmControl::Skill(bounds),
     }
 }
 

@@ -28,6 +28,23 @@ pub struct BodyWeights {
     pub alive: f64,
 }
 
+/// The penalty baseline's extra terms (the paper's Eqs. 5 and 6; `[penalty]` of a whole-body
+/// training config). Both 0 by default: the plain task.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PenaltyWeights {
+    /// Leg tool orientation reward `w_ori exp(-sum_i theta_i)` (Eq. 5).
+    pub w_ori: f64,
+    /// Penalty per step with an undesired arm contact (Eq. 6).
+    pub w_c: f64,
+}
+
+impl PenaltyWeights {
+    pub fn any(&self) -> bool {
+        self.w_ori != 0.0 || self.w_c != 0.0
+    }
+}
+
 /// Every term of one step's reward, signed as added.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct BodyTerms {
@@ -37,6 +54,10 @@ pub struct BodyTerms {
     pub joint_velocity: f64,
     pub action_rate: f64,
     pub alive: f64,
+    /// Eq. 5 (penalty baseline only).
+    pub leg_orientation: f64,
+    /// Eq. 6 (penalty baseline only).
+    pub contact: f64,
 }
 
 impl BodyTerms {
@@ -47,6 +68,27 @@ impl BodyTerms {
             + self.joint_velocity
             + self.action_rate
             + self.alive
+            + self.leg_orientation
+            + self.contact
+    }
+}
+
+/// Eq. 5: `w_ori exp(-sum_i theta_i)` over the angles [rad] between each leg tool's x axis
+/// and gravity (0 for a robot without legs: the term rewards a posture it cannot have).
+pub fn leg_orientation_reward(w_ori: f64, leg_angles_rad: &[f64]) -> f64 {
+    if leg_angles_rad.is_empty() {
+        0.0
+    } else {
+        w_ori * (-leg_angles_rad.iter().sum::<f64>()).exp()
+    }
+}
+
+/// Eq. 6: `-w_c` when an undesired arm contact occurs, else 0.
+pub fn contact_penalty(w_c: f64, contact: bool) -> f64 {
+    if contact {
+        -w_c
+    } else {
+        0.0
     }
 }
 
@@ -73,6 +115,7 @@ pub fn body_terms(
         joint_velocity: -w.w_v * speed,
         action_rate: -w.w_a * rate,
         alive: w.alive,
+        ..BodyTerms::default()
     }
 }
 
@@ -115,6 +158,25 @@ mod tests {
         // At the target with no motion: both position terms are whole.
         let t = body_terms(0.0, 0.0, &[0.0], &[0.0], &[0.0], &W);
         assert_eq!(t.total(), 1.0 + 2.0 + 0.2);
+    }
+
+    #[test]
+    fn penalty_terms_by_hand() {
+        // Three legs at 0.1, 0.2 and 0.3 rad from gravity: exp(-0.6) = 0.548812.
+        let r = leg_orientation_reward(2.0, &[0.1, 0.2, 0.3]);
+        assert!((r - 2.0 * 0.548_812).abs() < 1e-6, "{r}");
+        // Legs straight along gravity earn the whole weight; no legs earn nothing.
+        assert_eq!(leg_orientation_reward(2.0, &[0.0, 0.0, 0.0]), 2.0);
+        assert_eq!(leg_orientation_reward(2.0, &[]), 0.0);
+        assert_eq!(contact_penalty(0.5, true), -0.5);
+        assert_eq!(contact_penalty(0.5, false), 0.0);
+        let t = BodyTerms {
+            leg_orientation: 1.0,
+            contact: -0.5,
+            ..BodyTerms::default()
+        };
+        assert_eq!(t.total(), 0.5);
+        assert!(!PenaltyWeights::default().any());
     }
 
     #[test]

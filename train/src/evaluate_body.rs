@@ -30,6 +30,9 @@ pub struct BodyEvaluation {
     pub contacts_per_episode: ErrorStats,
     /// Episodes that ended by a fall (base tilt past the limit) or diverged physics.
     pub terminations: usize,
+    /// Every episode's outcome, in seed order (for plots; not printed).
+    #[serde(skip)]
+    pub episodes: Vec<Episode>,
 }
 
 impl BodyEvaluation {
@@ -123,9 +126,9 @@ impl ContactRule {
     }
 }
 
-/// The mean angle [rad] between each leg tool's x axis and gravity (Eq. 5), NaN without legs.
-pub fn leg_orientation(model: &RobotModel, world: &dyn SimWorld) -> f64 {
-    let angles: Vec<f64> = model
+/// The angle [rad] between each leg tool's x axis and gravity (Eq. 5's theta_i), per leg.
+pub fn leg_angles(model: &RobotModel, world: &dyn SimWorld) -> Vec<f64> {
+    model
         .modules_with_role(Role::Leg)
         .filter_map(|m| m.ee_link.as_deref())
         .filter_map(|link| world.link_pose(link).ok())
@@ -133,7 +136,12 @@ pub fn leg_orientation(model: &RobotModel, world: &dyn SimWorld) -> f64 {
             let x = pose.rotation * Vector3::x();
             x.dot(&-Vector3::z()).clamp(-1.0, 1.0).acos()
         })
-        .collect();
+        .collect()
+}
+
+/// The mean angle [rad] between each leg tool's x axis and gravity (Eq. 5), NaN without legs.
+pub fn leg_orientation(model: &RobotModel, world: &dyn SimWorld) -> f64 {
+    let angles = leg_angles(model, world);
     if angles.is_empty() {
         f64::NAN
     } else {
@@ -142,12 +150,18 @@ pub fn leg_orientation(model: &RobotModel, world: &dyn SimWorld) -> f64 {
 }
 
 /// One episode's outcome.
-struct Episode {
-    position: f64,
-    yaw: f64,
-    leg: f64,
-    contacts: usize,
-    terminated: bool,
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Episode {
+    /// Final tool position error [m].
+    pub position: f64,
+    /// Final absolute yaw error [rad].
+    pub yaw: f64,
+    /// Final mean leg tool angle to gravity [rad] (NaN without legs).
+    pub leg: f64,
+    /// Control steps with an undesired contact.
+    pub contacts: usize,
+    /// Ended by a fall or diverged physics.
+    pub terminated: bool,
 }
 
 /// Evaluates a whole-body policy over `rollouts` episodes. `make_policy` builds one policy
@@ -216,5 +230,6 @@ where
         leg_orientation_rad: stats(&|e| e.leg, false),
         contacts_per_episode: stats(&|e| e.contacts as f64, true),
         terminations: episodes.len() - finished.len(),
+        episodes,
     })
 }

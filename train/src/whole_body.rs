@@ -3,6 +3,11 @@
 //! yaw) is drawn around it, and the policy commands the frozen skill of every arm module and
 //! the velocity of every wheel module through the action terms of `kumi-terms`. A thin shell:
 //! observation, action terms and reward are shared pure functions; physics is any engine.
+//!
+//! The flat baseline (SPEC section 6) is the same environment with other terms: every arm
+//! joint's position target directly, and every arm module's joint state added to the
+//! observation ([`ArmControl::Joints`]); the penalty baseline adds Eqs. 5 and 6 to its reward
+//! ([`PenaltyWeights`]).
 
 use std::f64::consts::PI;
 use std::ops::Range;
@@ -12,7 +17,7 @@ use kumi_model::{ActuatorMode, RobotModel, Role};
 use kumi_policies::observation::{self as skill_obs, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy};
-use kumi_terms::action::{ActionTerms, GoalBounds};
+use kumi_terms::action::{ActionTerms, GoalBounds, JointBounds};
 use kumi_terms::observation::{self as body_obs, BodyState, Target, ToolChain};
 use kumi_worlds::{home_joint_positions, Engine, SimConfig, SimWorld};
 use nalgebra::{Isometry3, Vector3};
@@ -20,7 +25,11 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::arm_reach::EnvError;
-use crate::body_reward::{body_terms, fallen, BodyTerms, BodyWeights};
+use crate::body_reward::{
+    body_terms, contact_penalty, fallen, leg_orientation_reward, BodyTerms, BodyWeights,
+    PenaltyWeights,
+};
+use crate::evaluate_body::{leg_angles, ContactRule};
 
 /// The task's settings per morphology (`[task]` in `train/configs/whole_body/*.toml`).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -56,16 +65,38 @@ impl TaskConfig {
     }
 }
 
+/// How the policy drives the arm modules.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ArmControl {
+    /// Through the frozen skill: a goal per arm module within these bounds (the paper's
+    /// hierarchical policy).
+    Skill(GoalBounds),
+    /// Every joint's position target directly (the flat baseline).
+    Joints(JointBounds),
+}
+
+impl ArmControl {
+    /// The action terms for `model`.
+    pub fn terms(&self, model: &RobotModel) -> Result<ActionTerms, kumi_terms::TermError> {
+        match self {
+            ArmControl::Skill(bounds) => ActionTerms::new(model, bounds),
+            ArmControl::Joints(bounds) => ActionTerms::flat(model, bounds),
+        }
+    }
+}
+
 /// Everything the environment needs besides the robot and the skill.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WholeBodyConfig {
     pub engine: Engine,
     pub task: TaskConfig,
     pub weights: BodyWeights,
-    pub bounds: GoalBounds,
+    /// The penalty baseline's terms (zero: none).
+    pub penalty: PenaltyWeights,
+    pub arms: ArmControl,
 }
 
-/// One arm module as the frozen-skill term drives it.
+/// One arm module as its term drives it.
 struct ArmIo {
     module: String,
     skill: ArmSkill,
@@ -97,7 +128,10 @@ pub struct WholeBody {
     wheel_joints: Vec<usize>,
     tool_link: String,
     tool_chain: ToolChain,
-    skill: SkillPolicy,
+    /// The frozen skill (none for the flat baseline).
+    skill: Option<SkillPolicy>,
+    /// Undesired contacts, for the penalty baseline.
+    contact_rule: ContactRule,
     config: WholeBodyConfig,
     episode_steps: usize,
     rng: ChaCha8Rng,
@@ -108,7 +142,8 @@ pub struct WholeBody {
 
 impl WholeBody {
     /// An environment for `model` (one manipulator, arm and wheel modules), its arms driven by
-    /// the skill in `skill_onnx` (the file's bytes; checked against every arm module), seeded.
+    /// the skill in `skill_onnx` (the file's bytes; checked against every arm module; unused
+    /// by the flat baseline), seeded.
     pub fn new(
         model: Arc<RobotModel>,
         config: WholeBodyConfig,
@@ -128,22 +163,27 @@ impl WholeBody {
             .ee_link
             .clone()
             .ok_or_else(|| EnvError::NotASingleArm(manipulator.name.clone()))?;
-        let terms =
-            ActionTerms::new(&model, &config.bounds).map_err(|e| EnvError::Goals(e.to_string()))?;
+        let terms = config
+            .arms
+            .terms(&model)
+            .map_err(|e| EnvError::Goals(e.to_string()))?;
         let sim = SimConfig::for_model(&model);
         let world = kumi_worlds::build(config.engine, model.clone(), sim)?;
         let mut arms = Vec::new();
-        for term in terms.arms() {
-            let module = model
-                .module(&term.module)
-                .expect("terms come from the model");
+        let arm_modules = terms.arms().map(|t| &t.module);
+        for name in arm_modules.chain(terms.joint_terms().map(|t| &t.module)) {
+            let module = model.module(name).expect("terms come from the model");
             arms.push(ArmIo {
-                module: term.module.clone(),
+                module: name.clone(),
                 skill: ArmSkill::new(module, sim.control_hz)?,
-                joints: world.module_range(&term.module)?,
+                joints: world.module_range(name)?,
             });
         }
-        let skill = load_skill(skill_onnx, &arms)?;
+        let skill = if terms.uses_skill() {
+            Some(load_skill(skill_onnx, &arms)?)
+        } else {
+            None
+        };
         let wheel_modules: Vec<String> = terms.wheels().map(|w| w.module.clone()).collect();
         let wheel_joints = world
             .servos()
@@ -164,6 +204,7 @@ impl WholeBody {
             tool_link,
             tool_chain: ToolChain::new(&model).map_err(EnvError::Goals)?,
             skill,
+            contact_rule: ContactRule::new(&model),
             config,
             episode_steps,
             rng: ChaCha8Rng::seed_from_u64(seed),
@@ -183,7 +224,25 @@ impl WholeBody {
     }
 
     pub fn observation_dim(&self) -> usize {
-        body_obs::size(&body_obs::slots(self.wheel_joints.len(), self.terms.size()))
+        let slots = body_obs::slots(self.wheel_joints.len(), self.terms.size());
+        body_obs::size(&body_obs::with_arm_state(slots, self.flat_joints()))
+    }
+
+    /// Arm joints whose state the flat baseline observes (0 over the skill).
+    fn flat_joints(&self) -> usize {
+        if self.skill.is_some() {
+            0
+        } else {
+            self.arms.iter().map(|a| a.joints.len()).sum()
+        }
+    }
+
+    /// The arm modules' joint angles or velocities, module by module.
+    fn arm_values(&self, all: &[f64]) -> Vec<f64> {
+        self.arms
+            .iter()
+            .flat_map(|a| all[a.joints.clone()].iter().copied())
+            .collect()
     }
 
     /// The simulated world (read-only).
@@ -267,14 +326,19 @@ impl WholeBody {
     pub fn observation(&self) -> Vec<f32> {
         let velocities = self.world.joint_velocities();
         let wheels: Vec<f64> = self.wheel_joints.iter().map(|&i| velocities[i]).collect();
-        body_obs::build(&BodyState {
+        let mut obs = body_obs::build(&BodyState {
             base_pose_w: self.world.base_pose(),
             base_linear_velocity_w: self.world.base_twist_w().0,
             tool_pose_w: self.observed_tool_pose_w(),
             target: self.target,
             wheel_velocities: &wheels,
             previous_action: &self.previous_action,
-        })
+        });
+        if self.skill.is_none() {
+            let positions = self.arm_values(&self.world.joint_positions());
+            body_obs::push_arm_state(&mut obs, &positions, &self.arm_values(&velocities));
+        }
+        obs
     }
 
     /// Each arm module's skill observation for its goal, as the arm-reach environment and the
@@ -299,15 +363,25 @@ impl WholeBody {
             .terms
             .commands(action)
             .expect("the trainer sends actions of the terms' size");
-        let observations = self.skill_observations(&commands.goals);
-        let skill_actions = self
+        let observations = self
             .skill
-            .act_batch(&observations)
-            .expect("the skill was checked at load");
-        for (arm, a) in self.arms.iter().zip(&skill_actions) {
-            self.world
-                .apply_increments(&arm.module, &arm.skill.increments(a))
-                .expect("increments are finite and sized for the module");
+            .is_some()
+            .then(|| self.skill_observations(&commands.goals));
+        if let (Some(skill), Some(observations)) = (self.skill.as_mut(), observations) {
+            let skill_actions = skill
+                .act_batch(&observations)
+                .expect("the skill was checked at load");
+            for (arm, a) in self.arms.iter().zip(&skill_actions) {
+                self.world
+                    .apply_increments(&arm.module, &arm.skill.increments(a))
+                    .expect("increments are finite and sized for the module");
+            }
+        } else {
+            for (arm, targets) in self.arms.iter().zip(&commands.joint_targets) {
+                self.world
+                    .set_position_targets(&arm.module, targets)
+                    .expect("targets are finite and sized for the module");
+            }
         }
         for (module, v) in self.wheel_modules.iter().zip(&commands.wheel_velocities) {
             self.world
@@ -318,13 +392,8 @@ impl WholeBody {
         self.step += 1;
 
         let (position_error, yaw_error) = self.errors();
-        let velocities = self.world.joint_velocities();
-        let arm_velocities: Vec<f64> = self
-            .arms
-            .iter()
-            .flat_map(|a| velocities[a.joints.clone()].iter().copied())
-            .collect();
-        let terms = body_terms(
+        let arm_velocities = self.arm_values(&self.world.joint_velocities());
+        let mut terms = body_terms(
             position_error,
             yaw_error,
             &arm_velocities,
@@ -332,6 +401,7 @@ impl WholeBody {
             &self.previous_action,
             &self.config.weights,
         );
+        self.add_penalties(&mut terms);
         self.previous_action.copy_from_slice(action);
         let terminated = self.world.diverged()
             || fallen(
@@ -346,6 +416,20 @@ impl WholeBody {
             truncated: self.step >= self.episode_steps,
             position_error,
             yaw_error,
+        }
+    }
+}
+
+impl WholeBody {
+    /// The penalty baseline's terms (Eqs. 5 and 6), when their weights are set.
+    fn add_penalties(&self, terms: &mut BodyTerms) {
+        let p = self.config.penalty;
+        if p.w_ori != 0.0 {
+            let angles = leg_angles(self.world.model(), self.world.as_ref());
+            terms.leg_orientation = leg_orientation_reward(p.w_ori, &angles);
+        }
+        if p.w_c != 0.0 {
+            terms.contact = contact_penalty(p.w_c, self.contact_rule.any(self.world.as_ref()));
         }
     }
 }

@@ -5,10 +5,10 @@ use std::sync::Arc;
 
 use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
 use kumi_policies::observation::{self, Goal};
-use kumi_terms::action::GoalBounds;
+use kumi_terms::action::{GoalBounds, JointBounds};
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig};
-use kumi_train::body_reward::BodyWeights;
-use kumi_train::whole_body::{TaskConfig, WholeBody, WholeBodyConfig};
+use kumi_train::body_reward::{BodyWeights, PenaltyWeights};
+use kumi_train::whole_body::{ArmControl, TaskConfig, WholeBody, WholeBodyConfig};
 use kumi_worlds::{default_training_engine, home_joint_positions, RobotState};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
@@ -42,12 +42,13 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             w_a: 0.005,
             alive: 0.0,
         },
-        bounds: GoalBounds {
+        penalty: PenaltyWeights::default(),
+        arms: ArmControl::Skill(GoalBounds {
             manipulator_position_m: 0.25,
             manipulator_rotation_rad: 0.5,
             leg_position_m: 0.1,
             leg_roll_rad: 0.5,
-        },
+        }),
     }
 }
 
@@ -139,6 +140,85 @@ fn sizes_follow_the_morphology_and_episodes_time_out() {
         assert_eq!(last.observation.len(), obs);
         assert!(last.reward.is_finite());
     }
+}
+
+#[test]
+fn the_flat_baseline_is_the_same_environment_with_joint_targets_and_the_arms_state() {
+    // SPEC section 6: every arm joint's target (7 per arm module) and a velocity per wheel
+    // module; the observation is the upper level's plus every arm joint's angle and velocity.
+    let flat = |engine_config: WholeBodyConfig| WholeBodyConfig {
+        arms: ArmControl::Joints(JointBounds {
+            joint_scale_rad: 0.5,
+        }),
+        ..engine_config
+    };
+    for (name, obs, act, arm_joints) in [
+        ("minimal", 34, 8, 7),
+        ("dragon", 58, 16, 14),
+        ("tricycle", 103, 31, 28),
+    ] {
+        // The flat baseline needs no skill: junk bytes are never read.
+        let mut env = WholeBody::new(model(name), flat(config(1.5)), b"no skill", 2).unwrap();
+        assert_eq!(env.observation_dim(), obs, "{name}");
+        assert_eq!(env.terms().size(), act, "{name}");
+        assert_eq!(env.reset().len(), obs);
+        let step = env.step(&vec![0.0; act]);
+        let (q, qd) = (
+            env.world().joint_positions(),
+            env.world().joint_velocities(),
+        );
+        let arm: Vec<usize> = env
+            .world()
+            .servos()
+            .actuators()
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| a.mode == kumi_model::ActuatorMode::Position)
+            .map(|(i, _)| i)
+            .collect();
+        assert_eq!(arm.len(), arm_joints);
+        let tail = &step.observation[obs - 2 * arm_joints..];
+        let expected: Vec<f32> = arm
+            .iter()
+            .map(|&i| q[i] as f32)
+            .chain(arm.iter().map(|&i| qd[i] as f32))
+            .collect();
+        assert_eq!(tail, &expected[..], "{name}");
+        // A zero action holds every arm joint's target at home.
+        let home = home_joint_positions(env.world().model());
+        for &i in &arm {
+            assert_eq!(env.world().commands()[i], home[i], "{name}: joint {i}");
+        }
+    }
+}
+
+#[test]
+fn the_penalty_terms_see_the_legs_and_contacts_of_the_world() {
+    // Eq. 5 from the world's leg tool poses; Eq. 6 off for a robot standing on its wheels.
+    let mut c = config(1.5);
+    c.penalty = PenaltyWeights {
+        w_ori: 2.0,
+        w_c: 0.5,
+    };
+    let tricycle = model("tricycle");
+    let mut env = WholeBody::new(tricycle.clone(), c, &skill(), 4).unwrap();
+    env.reset();
+    let step = env.step(&[0.0; 21]);
+    let angles = kumi_train::evaluate_body::leg_angles(&tricycle, env.world());
+    assert_eq!(angles.len(), 3);
+    let expected = 2.0 * (-angles.iter().sum::<f64>()).exp();
+    assert!(
+        (step.terms.leg_orientation - expected).abs() < 1e-12,
+        "{step:?}"
+    );
+    assert!(step.terms.leg_orientation > 0.0);
+    let contact = kumi_train::evaluate_body::ContactRule::new(&tricycle).any(env.world());
+    assert_eq!(step.terms.contact, if contact { -0.5 } else { 0.0 });
+    // Without weights, neither term is computed.
+    let mut plain = WholeBody::new(tricycle, config(1.5), &skill(), 4).unwrap();
+    plain.reset();
+    let step = plain.step(&[0.0; 21]);
+    assert_eq!((step.terms.leg_orientation, step.terms.contact), (0.0, 0.0));
 }
 
 #[test]

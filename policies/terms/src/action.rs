@@ -68,6 +68,11 @@ impl GoalBounds {
             if role == "wheel" {
                 continue;
             }
+            if fields.get(3) == Some(&"joint_targets") {
+                return Err(bad(format!(
+                    "`{entry}`: a flat baseline policy (joint targets), not a policy over the skill"
+                )));
+            }
             let value = |i: usize, key: &str| -> Result<f64, TermError> {
                 fields
                     .get(i)
@@ -125,6 +130,17 @@ pub fn clip(a: f32) -> f64 {
     }
 }
 
+/// An arm module's home joint angles [rad].
+fn home_angles(module: &ModuleInstance) -> Result<[f64; JOINTS], TermError> {
+    <[f64; JOINTS]>::try_from(module.home.as_slice()).map_err(|_| TermError::Module {
+        module: module.name.clone(),
+        message: format!(
+            "{} home angles, an arm module has {JOINTS}",
+            module.home.len()
+        ),
+    })
+}
+
 /// The frozen skill's goal for one arm module.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArmGoalTerm {
@@ -150,14 +166,8 @@ impl ArmGoalTerm {
             module: module.name.clone(),
             message,
         };
-        if module.home.len() != JOINTS {
-            return Err(fail(format!(
-                "{} home angles, an arm module has {JOINTS}",
-                module.home.len()
-            )));
-        }
+        let home = home_angles(module)?;
         let kinematics = ToolKinematics::new(model, module).map_err(fail)?;
-        let home: [f64; JOINTS] = std::array::from_fn(|j| module.home[j]);
         let (position_scale_m, rotation_scale_rad) = match module.role {
             Role::Manipulator => (
                 bounds.manipulator_position_m,
@@ -219,6 +229,36 @@ impl ArmGoalTerm {
     }
 }
 
+/// The flat baseline's arm term (SPEC section 6): an arm module's seven joints commanded
+/// directly, no skill between. Each action value moves its joint's absolute position target
+/// from the home angle by up to `scale_rad`; the servos clamp to the joint range and slew as
+/// they do for the skill's increments.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointTargetTerm {
+    pub module: String,
+    pub role: Role,
+    /// The module's home joint angles [rad].
+    pub home_rad: [f64; JOINTS],
+    /// Offset from home for an action of 1 [rad].
+    pub scale_rad: f64,
+}
+
+impl JointTargetTerm {
+    /// The absolute joint position targets [rad] for this term's `JOINTS` action values.
+    pub fn targets(&self, action: &[f32]) -> [f64; JOINTS] {
+        std::array::from_fn(|j| self.home_rad[j] + clip(action[j]) * self.scale_rad)
+    }
+}
+
+/// How far the flat baseline's joint targets may move from home (`[flat]` of a whole-body
+/// training config).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointBounds {
+    /// Largest offset of each arm joint's target from its home angle [rad].
+    pub joint_scale_rad: f64,
+}
+
 /// One velocity for both wheels of a wheel module.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WheelTerm {
@@ -240,6 +280,7 @@ impl WheelTerm {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Term {
     Arm(ArmGoalTerm),
+    Joints(JointTargetTerm),
     Wheel(WheelTerm),
 }
 
@@ -247,6 +288,7 @@ impl Term {
     pub fn module(&self) -> &str {
         match self {
             Term::Arm(t) => &t.module,
+            Term::Joints(t) => &t.module,
             Term::Wheel(t) => &t.module,
         }
     }
@@ -254,16 +296,20 @@ impl Term {
     pub fn width(&self) -> usize {
         match self {
             Term::Arm(t) => t.width(),
+            Term::Joints(_) => JOINTS,
             Term::Wheel(_) => 1,
         }
     }
 }
 
-/// What one action commands: a goal per arm module and a velocity per wheel module, each in
-/// the order of [`ActionTerms::arms`] and [`ActionTerms::wheels`].
+/// What one action commands: a goal per arm module (or, for the flat baseline, joint targets
+/// per arm module) and a velocity per wheel module, each in the order of
+/// [`ActionTerms::arms`], [`ActionTerms::joint_terms`] and [`ActionTerms::wheels`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Commands {
     pub goals: Vec<Goal>,
+    /// Absolute joint position targets [rad] (flat baseline only).
+    pub joint_targets: Vec<[f64; JOINTS]>,
     pub wheel_velocities: Vec<f64>,
 }
 
@@ -274,15 +320,46 @@ pub struct ActionTerms {
 }
 
 impl ActionTerms {
-    /// The terms of every arm and wheel module of `model`.
+    /// The terms of every arm and wheel module of `model`: a goal for the frozen skill per
+    /// arm module.
     pub fn new(model: &RobotModel, bounds: &GoalBounds) -> Result<Self, TermError> {
         bounds.check()?;
+        Self::build(model, |module| {
+            Ok(Term::Arm(ArmGoalTerm::new(model, module, bounds)?))
+        })
+    }
+
+    /// The flat baseline's terms (SPEC section 6): every arm joint's position target directly,
+    /// a velocity per wheel module.
+    pub fn flat(model: &RobotModel, bounds: &JointBounds) -> Result<Self, TermError> {
+        let scale = bounds.joint_scale_rad;
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(TermError::Bound {
+                name: "joint_scale_rad",
+                value: scale,
+            });
+        }
+        Self::build(model, |module| {
+            Ok(Term::Joints(JointTargetTerm {
+                module: module.name.clone(),
+                role: module.role,
+                home_rad: home_angles(module)?,
+                scale_rad: scale,
+            }))
+        })
+    }
+
+    /// Every module's term: `arm` makes an arm module's, a wheel module gets a wheel term.
+    fn build(
+        model: &RobotModel,
+        arm: impl Fn(&ModuleInstance) -> Result<Term, TermError>,
+    ) -> Result<Self, TermError> {
         let mut terms = Vec::new();
         for module in &model.modules {
             let positions = module.position_joints().count();
             let wheels = module.velocity_joints().count();
             if positions == JOINTS && wheels == 0 && module.ee_link.is_some() {
-                terms.push(Term::Arm(ArmGoalTerm::new(model, module, bounds)?));
+                terms.push(arm(module)?);
             } else if wheels > 0 && positions == 0 {
                 let limit = module
                     .actuators
@@ -316,15 +393,29 @@ impl ActionTerms {
     pub fn arms(&self) -> impl Iterator<Item = &ArmGoalTerm> {
         self.terms.iter().filter_map(|t| match t {
             Term::Arm(a) => Some(a),
-            Term::Wheel(_) => None,
+            _ => None,
+        })
+    }
+
+    /// The flat baseline's joint-target terms (none for a policy over the skill).
+    pub fn joint_terms(&self) -> impl Iterator<Item = &JointTargetTerm> {
+        self.terms.iter().filter_map(|t| match t {
+            Term::Joints(j) => Some(j),
+            _ => None,
         })
     }
 
     pub fn wheels(&self) -> impl Iterator<Item = &WheelTerm> {
         self.terms.iter().filter_map(|t| match t {
             Term::Wheel(w) => Some(w),
-            Term::Arm(_) => None,
+            _ => None,
         })
+    }
+
+    /// Whether these terms drive arm modules through the frozen skill (false: the flat
+    /// baseline, or a robot with wheels only).
+    pub fn uses_skill(&self) -> bool {
+        self.arms().next().is_some()
     }
 
     /// The commands for one action vector of [`Self::size`] values.
@@ -337,6 +428,7 @@ impl ActionTerms {
         }
         let mut commands = Commands {
             goals: Vec::new(),
+            joint_targets: Vec::new(),
             wheel_velocities: Vec::new(),
         };
         let mut at = 0;
@@ -344,6 +436,7 @@ impl ActionTerms {
             let values = &action[at..at + term.width()];
             match term {
                 Term::Arm(t) => commands.goals.push(t.goal(values)),
+                Term::Joints(t) => commands.joint_targets.push(t.targets(values)),
                 Term::Wheel(t) => commands.wheel_velocities.push(t.velocity(values[0])),
             }
             at += term.width();
@@ -358,6 +451,9 @@ impl ActionTerms {
             match term {
                 Term::Arm(t) => {
                     names.extend(t.value_names().iter().map(|v| format!("{}/{v}", t.module)))
+                }
+                Term::Joints(t) => {
+                    names.extend((1..=JOINTS).map(|j| format!("{}/joint{j}", t.module)))
                 }
                 Term::Wheel(t) => names.push(format!("{}/velocity", t.module)),
             }
@@ -383,6 +479,10 @@ impl ActionTerms {
                         "roll_rad"
                     },
                     t.rotation_scale_rad
+                ),
+                Term::Joints(t) => format!(
+                    "{}:{}:{}:joint_targets:scale_rad={}",
+                    t.module, t.role, JOINTS, t.scale_rad
                 ),
                 Term::Wheel(t) => {
                     format!("{}:wheel:1:velocity_rad_s={}", t.module, t.scale_rad_s)

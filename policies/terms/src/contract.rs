@@ -16,8 +16,11 @@ pub const WHOLE_BODY_FORMAT: &str = "kumi-policy/whole-body/1";
 pub const MORPHOLOGY: &str = "kumi.morphology";
 /// Fingerprint of the assembled robot (URDF, module roles and home angles).
 pub const MORPHOLOGY_FINGERPRINT: &str = "kumi.morphology_fingerprint";
-/// Fingerprint of the frozen skill's ONNX file the policy was trained over.
+/// Fingerprint of the frozen skill's ONNX file the policy was trained over ([`NO_SKILL`] for
+/// the flat baseline).
 pub const SKILL_FINGERPRINT: &str = "kumi.skill_fingerprint";
+/// The skill fingerprint of a policy that drives its joints without the skill.
+pub const NO_SKILL: &str = "none";
 /// The action terms ([`ActionTerms::describe`]).
 pub const ACTION: &str = "kumi.action";
 
@@ -59,8 +62,8 @@ pub fn morphology_fingerprint(model: &RobotModel) -> String {
     metadata::fingerprint(&text)
 }
 
-/// What a whole-body policy for `model`, its `terms`, the skill file `skill_onnx` (its bytes)
-/// and `control_hz` must carry.
+/// What a whole-body policy for `model`, its `terms`, the skill file `skill_onnx` (its bytes;
+/// unused by flat terms) and `control_hz` must carry.
 pub fn contract(
     model: &RobotModel,
     terms: &ActionTerms,
@@ -68,12 +71,18 @@ pub fn contract(
     control_hz: f64,
 ) -> BTreeMap<String, String> {
     let wheels = terms.wheels().map(|w| w.wheels).sum();
-    let slots = observation::slots(wheels, terms.size());
+    let arm_joints = terms.joint_terms().count() * kumi_policies::observation::JOINTS;
+    let slots = observation::with_arm_state(observation::slots(wheels, terms.size()), arm_joints);
+    let skill = if terms.uses_skill() {
+        metadata::fingerprint_bytes(skill_onnx)
+    } else {
+        NO_SKILL.to_string()
+    };
     [
         (metadata::FORMAT, WHOLE_BODY_FORMAT.to_string()),
         (MORPHOLOGY, model.name.clone()),
         (MORPHOLOGY_FINGERPRINT, morphology_fingerprint(model)),
-        (SKILL_FINGERPRINT, metadata::fingerprint_bytes(skill_onnx)),
+        (SKILL_FINGERPRINT, skill),
         (
             metadata::OBSERVATION_DIM_KEY,
             observation::size(&slots).to_string(),

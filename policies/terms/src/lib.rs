@@ -13,5 +13,7 @@ pub mod action;
 pub mod contract;
 pub mod observation;
 
-pub use action::{ActionTerms, ArmGoalTerm, GoalBounds, TermError, WheelTerm};
+pub use action::{
+    ActionTerms, ArmGoalTerm, GoalBounds, JointBounds, JointTargetTerm, TermError, WheelTerm,
+};
 pub use observation::{BodyState, ObservationSlot, Target, ToolChain};

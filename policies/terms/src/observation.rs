@@ -36,6 +36,34 @@ pub fn slots(wheels: usize, action_size: usize) -> Vec<ObservationSlot> {
     ]
 }
 
+/// The flat baseline's slots (SPEC section 6): the upper-level `slots` followed by every arm
+/// module's low-level state, `arm_joints` joint angles and as many velocities (none: the
+/// slots unchanged).
+pub fn with_arm_state(mut slots: Vec<ObservationSlot>, arm_joints: usize) -> Vec<ObservationSlot> {
+    if arm_joints > 0 {
+        slots.push(ObservationSlot {
+            name: "arm_joint_positions",
+            size: arm_joints,
+            unit: "rad",
+            frame: "joint",
+        });
+        slots.push(ObservationSlot {
+            name: "arm_joint_velocities",
+            size: arm_joints,
+            unit: "rad/s",
+            frame: "joint",
+        });
+    }
+    slots
+}
+
+/// Appends the arm modules' joint angles [rad] and velocities [rad/s] to an observation, in
+/// the slots of [`with_arm_state`].
+pub fn push_arm_state(obs: &mut Vec<f32>, positions: &[f64], velocities: &[f64]) {
+    obs.extend(positions.iter().map(|v| *v as f32));
+    obs.extend(velocities.iter().map(|v| *v as f32));
+}
+
 /// Total length of an observation with these slots.
 pub fn size(slots: &[ObservationSlot]) -> usize {
     slots.iter().map(|s| s.size).sum()

@@ -2,7 +2,7 @@
 
 use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel, Role};
 use kumi_policies::rotation::orientation_error;
-use kumi_terms::action::{ActionTerms, GoalBounds, Term};
+use kumi_terms::action::{ActionTerms, GoalBounds, JointBounds, Term};
 use kumi_terms::contract::{self, ContractMismatch};
 
 fn robot(name: &str) -> RobotModel {
@@ -185,5 +185,68 @@ fn bounds_read_back_from_the_action_description() {
         "arm0:manipulator:6:position_m=-1:rotation_rad=0.5",
     ] {
         assert!(GoalBounds::from_description(bad).is_err(), "{bad}");
+    }
+}
+
+#[test]
+fn flat_terms_command_every_arm_joint_around_home_by_hand() {
+    // The flat baseline (SPEC section 6): 7 joint targets per arm module, one velocity per
+    // wheel module. Tricycle: 4 arms, 3 wheel modules.
+    let model = robot("tricycle");
+    let terms = ActionTerms::flat(
+        &model,
+        &JointBounds {
+            joint_scale_rad: 0.5,
+        },
+    )
+    .unwrap();
+    assert_eq!(terms.size(), 4 * 7 + 3);
+    assert!(!terms.uses_skill());
+    assert_eq!(terms.arms().count(), 0);
+    assert_eq!(terms.names()[..2], ["arm0/joint1", "arm0/joint2"]);
+    // Zero holds home; 1 moves by the scale; past 1 clips; NaN holds home.
+    let mut action = vec![0.0_f32; terms.size()];
+    let leg1 = model.module("leg1").unwrap();
+    let first_leg = terms
+        .terms
+        .iter()
+        .take_while(|t| t.module() != "leg1")
+        .map(Term::width)
+        .sum::<usize>();
+    assert_eq!(first_leg, 14, "arm0 and leg0 come first");
+    action[first_leg] = 1.0;
+    action[first_leg + 3] = -3.0;
+    action[first_leg + 6] = f32::NAN;
+    let commands = terms.commands(&action).unwrap();
+    assert_eq!(commands.joint_targets.len(), 4);
+    assert!(commands.goals.is_empty());
+    let leg1_targets = commands.joint_targets[2];
+    assert_eq!(leg1_targets[0], leg1.home[0] + 0.5);
+    assert_eq!(leg1_targets[3], leg1.home[3] - 0.5);
+    assert_eq!(leg1_targets[6], leg1.home[6]);
+    assert_eq!(leg1_targets[1], leg1.home[1]);
+    assert_eq!(
+        commands.joint_targets[0].to_vec(),
+        model.module("arm0").unwrap().home
+    );
+    // The description says what the policy is; a node over the skill refuses it by name.
+    let described = terms.describe();
+    assert!(described.starts_with("arm0:manipulator:7:joint_targets:scale_rad=0.5;"));
+    let err = GoalBounds::from_description(&described).unwrap_err();
+    assert!(err.to_string().contains("flat baseline"), "{err}");
+    // A flat policy's contract carries no skill and the arm state slots.
+    let c = contract::contract(&model, &terms, b"any skill", 30.0);
+    assert_eq!(c[contract::SKILL_FINGERPRINT], contract::NO_SKILL);
+    assert!(c[kumi_policies::metadata::OBSERVATION]
+        .ends_with("arm_joint_positions:28:rad:joint;arm_joint_velocities:28:rad/s:joint"));
+    // A scale that is not positive is refused.
+    for bad in [0.0, -1.0, f64::NAN] {
+        assert!(ActionTerms::flat(
+            &model,
+            &JointBounds {
+                joint_scale_rad: bad
+            }
+        )
+        .is_err());
     }
 }
