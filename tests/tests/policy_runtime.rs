@@ -180,47 +180,61 @@ fn the_shipped_policy_drives_every_arm_module_of_every_morphology() {
 #[test]
 fn every_shipped_whole_body_policy_fits_its_robot_and_the_shipped_skill() {
     // The contract a whole-body policy is loaded against, built as `kumi eval whole-body` and
-    // the whole-body node build it: the robot, its config's goal bounds, the shipped skill.
+    // the whole-body node build it: the robot, its config's goal bounds (or, for the flat and
+    // penalty baselines, joint bounds), the shipped skill.
     #[derive(serde::Deserialize)]
     struct Config {
-        action: kumi_terms::action::GoalBounds,
+        action: Option<kumi_terms::action::GoalBounds>,
+        flat: Option<kumi_terms::action::JointBounds>,
     }
     let skill = std::fs::read(kumi_runtime::shipped_arm_policy()).unwrap();
     let mut loaded = Vec::new();
     for name in ["minimal", "dragon", "tricycle"] {
-        let path = kumi_runtime::shipped_whole_body_policy(name);
-        if !path.exists() {
-            continue;
+        for (file, configs) in [
+            ("whole_body", "whole_body"),
+            ("flat", "flat"),
+            ("penalty", "penalty"),
+        ] {
+            let path =
+                kumi_runtime::shipped_arm_policy().with_file_name(format!("{name}_{file}.onnx"));
+            if !path.exists() {
+                continue;
+            }
+            let robot = kumi_tests::shipped_model(name);
+            let text = std::fs::read_to_string(
+                kumi_tests::workspace().join(format!("train/configs/{configs}/{name}.toml")),
+            )
+            .unwrap_or_else(|e| panic!("{name} {file}: no config: {e}"));
+            let config: Config = toml::from_str(&text).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let terms = match (config.action, config.flat) {
+                (Some(bounds), None) => kumi_terms::ActionTerms::new(&robot, &bounds).unwrap(),
+                (None, Some(bounds)) => kumi_terms::ActionTerms::flat(&robot, &bounds).unwrap(),
+                _ => panic!("{name} {file}: one of [action] and [flat]"),
+            };
+            let expected = kumi_terms::contract::contract(
+                &robot,
+                &terms,
+                &skill,
+                kumi_model::commands::CONTROL_HZ,
+            );
+            let mut policy =
+                kumi_runtime::WholeBodyPolicy::load(&path, &expected, BackendChoice::Tract)
+                    .unwrap_or_else(|e| panic!("{name} {file}: {e}"));
+            let size: usize = expected[kumi_policies::metadata::OBSERVATION_DIM_KEY]
+                .parse()
+                .unwrap();
+            let action = policy.act(&vec![0.0; size]).unwrap();
+            assert_eq!(action.len(), terms.size());
+            assert!(
+                action.iter().all(|a| a.is_finite()),
+                "{name} {file}: {action:?}"
+            );
+            loaded.push(format!("{name}_{file}"));
         }
-        let robot = kumi_tests::shipped_model(name);
-        let text = std::fs::read_to_string(
-            kumi_tests::workspace().join(format!("train/configs/whole_body/{name}.toml")),
-        )
-        .unwrap();
-        let config: Config = toml::from_str(&text).unwrap_or_else(|e| panic!("{name}: {e}"));
-        let terms = kumi_terms::ActionTerms::new(&robot, &config.action).unwrap();
-        let expected = kumi_terms::contract::contract(
-            &robot,
-            &terms,
-            &skill,
-            kumi_model::commands::CONTROL_HZ,
-        );
-        let mut policy =
-            kumi_runtime::WholeBodyPolicy::load(&path, &expected, BackendChoice::Tract)
-                .unwrap_or_else(|e| panic!("{name}: {e}"));
-        let size = kumi_terms::observation::size(&kumi_terms::observation::slots(
-            robot
-                .modules
-                .iter()
-                .map(|m| m.velocity_joints().count())
-                .sum(),
-            terms.size(),
-        ));
-        let action = policy.act(&vec![0.0; size]).unwrap();
-        assert_eq!(action.len(), terms.size());
-        assert!(action.iter().all(|a| a.is_finite()), "{name}: {action:?}");
-        loaded.push(name);
     }
     // Minimal's is shipped (policies/minimal_whole_body.md); the others join as they are.
-    assert!(loaded.contains(&"minimal"), "{loaded:?}");
+    assert!(
+        loaded.contains(&"minimal_whole_body".to_string()),
+        "{loaded:?}"
+    );
 }
