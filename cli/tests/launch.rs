@@ -40,8 +40,13 @@ fn launch(domain: u16, args: &[&str]) -> KumiProcess {
 }
 
 fn send_target(domain: u16, robot: &str, extra: &[&str]) -> serde_json::Value {
+    send_target_for(domain, robot, DRIVE_S, extra)
+}
+
+/// [`send_target`], watching `drive_s` simulated seconds.
+fn send_target_for(domain: u16, robot: &str, drive_s: f64, extra: &[&str]) -> serde_json::Value {
     let goal = TARGET.map(|v| v.to_string()).join(",");
-    let drive = DRIVE_S.to_string();
+    let drive = drive_s.to_string();
     let mut args = vec![
         "target",
         "--robot",
@@ -307,6 +312,47 @@ fn modules_join_by_hand_robots_share_a_domain_duplicates_are_refused_and_a_dead_
     }
     drop(first);
     drop(by_hand);
+}
+
+/// Dragon runs on MuJoCo: its policy was trained there and does not carry over to rapier
+/// (policies/dragon_whole_body.md).
+#[cfg(feature = "mujoco")]
+#[test]
+fn a_launched_dragon_reaches_a_target_from_rclpy_on_mujoco() {
+    let domain = fresh_domain();
+    let launch = launch(
+        domain,
+        &[
+            "dragon",
+            "--lockstep",
+            "--engine",
+            "mujoco",
+            "--backend",
+            "tract",
+        ],
+    );
+    // A whole 12 s training episode: Dragon turns by steering its rear wheel module.
+    let out = send_target_for(domain, "dragon", 12.0, &[]);
+    let error = number(&out["position_error_m"]);
+    let d = &out["diagnostics"];
+    println!(
+        "dragon over ROS (lockstep, MuJoCo): tool {error:.4} m and {:.3} rad from the target after 12 s of sim time, {:.1} s of wall time; diagnostics {d}",
+        number(&out["yaw_error_rad"]),
+        number(&out["wall_s"])
+    );
+    assert_eq!(number(&d["unsynchronised_ticks"]), 0.0, "{d}");
+    // Every goal the policy sent reached both arm modules (the leg's home tool is at its full
+    // reach: a tighter reach check once refused all of its goals).
+    for module in ["arm0", "leg0"] {
+        let arm = &out["all_diagnostics"][format!("kumi arm node: dragon/{module}")];
+        assert_eq!(number(&arm["goals_rejected"]), 0.0, "{module}: {arm}");
+        assert!(number(&arm["goals_accepted"]) > 300.0, "{module}: {arm}");
+    }
+    // The bound: Dragon's mean final error over 1000 MuJoCo rollouts
+    // (policies/dragon_whole_body.md). Lockstep is deterministic: this episode is one draw
+    // from that evaluation's kind, the same on every run.
+    assert!(error < 0.214, "{out}");
+    drop(launch);
 }
 
 #[test]

@@ -157,3 +157,55 @@ fn wheel_joint_velocities_match_what_the_simulator_commands() {
         assert!(kumi_model::commands::wheel_joint_velocities(&model, "nope", 1.0).is_none());
     }
 }
+
+#[test]
+fn every_goal_a_shipped_whole_body_policy_can_send_is_accepted_by_its_arm_node() {
+    // The arm node refuses goals beyond its reach; the whole-body terms send goals anywhere in
+    // the box of their bounds around each module's home tool pose. Every corner of every box
+    // (position offsets and rotations at their bounds) must pass, or a module silently loses
+    // its goals (Dragon's leg did: its home tool is at its full reach).
+    use kumi_arm_node::goal::{reach_m, GoalRules};
+    use kumi_msgs::geometry_msgs::PoseStamped;
+    use kumi_msgs::std_msgs::Header;
+    let mut checked = 0;
+    for name in ["minimal", "dragon", "tricycle"] {
+        let robot = model(name);
+        let text = std::fs::read_to_string(
+            kumi_tests::workspace().join(format!("train/configs/whole_body/{name}.toml")),
+        )
+        .unwrap();
+        #[derive(serde::Deserialize)]
+        struct Config {
+            action: GoalBounds,
+        }
+        let config: Config = toml::from_str(&text).unwrap();
+        let terms = ActionTerms::new(&robot, &config.action).unwrap();
+        for term in terms.arms() {
+            let module = robot.module(&term.module).unwrap();
+            let kinematics =
+                kumi_policies::kinematics::ToolKinematics::new(&robot, module).unwrap();
+            let rules = GoalRules {
+                frames: Vec::new(),
+                reach: reach_m(&kinematics),
+            };
+            for corner in 0..(1 << term.width()) {
+                let action: Vec<f32> = (0..term.width())
+                    .map(|i| if corner >> i & 1 == 1 { 1.0 } else { -1.0 })
+                    .collect();
+                let goal = term.goal(&action);
+                let pose =
+                    nalgebra::Isometry3::from_parts(goal.position_b.into(), goal.orientation_b);
+                let msg = PoseStamped {
+                    header: Header::default(),
+                    pose: kumi_ros::geometry::pose(&pose),
+                };
+                rules
+                    .accept(&msg)
+                    .unwrap_or_else(|e| panic!("{name}/{}: corner {action:?}: {e}", term.module));
+                checked += 1;
+            }
+        }
+    }
+    // Minimal 64, Dragon 64 + 16, Tricycle 64 + 3 x 16.
+    assert_eq!(checked, 64 + 80 + 112);
+}

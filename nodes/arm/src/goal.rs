@@ -7,8 +7,22 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 /// How far a quaternion's norm may be from 1 and still be normalised rather than refused.
 pub const QUATERNION_NORM_TOLERANCE: f64 = 0.1;
-/// Goals further than the arm's reach plus this margin [m] are refused.
-pub const WORKSPACE_MARGIN: f64 = 0.1;
+/// Goals further than the arm's reach plus this margin [m] are refused. It covers every goal
+/// a shipped whole-body policy can send: Dragon's leg stands straight up, its home tool at its
+/// full reach (1.46 m), and its goals may lie up to 0.17 m further (0.1 m along each axis); a
+/// margin of 0.1 m refused them all and left the leg without goals (`tests/tests/
+/// whole_body_node_consistency.rs` checks every shipped robot's furthest goals).
+pub const WORKSPACE_MARGIN: f64 = 0.3;
+
+/// An arm's reach [m]: the distance from its base to its tool with every joint at zero
+/// (stretched out).
+pub fn reach_m(kinematics: &kumi_policies::kinematics::ToolKinematics) -> f64 {
+    kinematics
+        .tool_pose_b(&[0.0; kumi_policies::observation::JOINTS])
+        .translation
+        .vector
+        .norm()
+}
 
 /// Why a goal was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

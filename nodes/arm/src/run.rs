@@ -138,11 +138,7 @@ impl Prepared {
             policy.backend()
         );
         let kinematics = ToolKinematics::new(model, module).map_err(ArmNodeError::Kinematics)?;
-        let reach = kinematics
-            .tool_pose_b(&[0.0; JOINTS])
-            .translation
-            .vector
-            .norm();
+        let reach = crate::goal::reach_m(&kinematics);
         let actuators: Vec<Actuator> = module.position_joints().cloned().collect();
         Ok(Self {
             controller: ArmController::new(
