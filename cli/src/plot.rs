@@ -48,18 +48,7 @@ pub fn top_down(title: &str, paths: &[Path], marks: &[Mark]) -> String {
             SIZE_PX - MARGIN_PX - (p[1] - origin[1]) * scale,
         )
     };
-    let mut svg = String::new();
-    let _ = writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{SIZE_PX}" height="{SIZE_PX}" viewBox="0 0 {SIZE_PX} {SIZE_PX}" font-family="sans-serif" font-size="12">"#
-    );
-    let _ = writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#);
-    let _ = writeln!(
-        svg,
-        r#"<text x="{}" y="20" text-anchor="middle" font-size="14">{}</text>"#,
-        SIZE_PX / 2.0,
-        escape(title)
-    );
+    let mut svg = svg_open(SIZE_PX, SIZE_PX, title);
     // Grid every metre (every 0.5 m for small spans).
     let step = if span > 4.0 { 1.0 } else { 0.5 };
     let mut g = (origin[0] / step).ceil() * step;
@@ -213,18 +202,7 @@ fn chart_frame(
         1.0
     };
     let y_px = move |v: f64| bottom - (v.clamp(0.0, y_max) / y_max) * (bottom - top);
-    let mut svg = String::new();
-    let _ = writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{CHART_W_PX}" height="{CHART_H_PX}" viewBox="0 0 {CHART_W_PX} {CHART_H_PX}" font-family="sans-serif" font-size="12">"#
-    );
-    let _ = writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#);
-    let _ = writeln!(
-        svg,
-        r#"<text x="{}" y="20" text-anchor="middle" font-size="14">{}</text>"#,
-        CHART_W_PX / 2.0,
-        escape(title)
-    );
+    let mut svg = svg_open(CHART_W_PX, CHART_H_PX, title);
     let step = nice_step(y_max / 5.0);
     let mut g = 0.0;
     while g <= y_max + 1e-12 {
@@ -392,6 +370,24 @@ pub fn line_plot(
         );
     }
     svg.push_str("</svg>\n");
+    svg
+}
+
+/// An SVG document opened: `width` x `height` px on white, `title` centred on top (close it
+/// with `</svg>`).
+fn svg_open(width: f64, height: f64, title: &str) -> String {
+    let mut svg = String::new();
+    let _ = writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" viewBox="0 0 {width} {height}" font-family="sans-serif" font-size="12">"#
+    );
+    let _ = writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#);
+    let _ = writeln!(
+        svg,
+        r#"<text x="{}" y="20" text-anchor="middle" font-size="14">{}</text>"#,
+        width / 2.0,
+        escape(title)
+    );
     svg
 }
 
