@@ -359,10 +359,12 @@ fn a_launched_dragon_reaches_a_target_from_rclpy_on_mujoco() {
         assert_eq!(number(&arm["goals_rejected"]), 0.0, "{module}: {arm}");
         assert!(number(&arm["goals_accepted"]) > 300.0, "{module}: {arm}");
     }
-    // The bound: Dragon's mean final error over 1000 MuJoCo rollouts
-    // (policies/dragon_whole_body.md). Lockstep is deterministic: this episode is one draw
-    // from that evaluation's kind, the same on every run.
-    assert!(error < 0.214, "{out}");
+    // The bound: the 90th percentile of Dragon's final error over 1000 MuJoCo rollouts
+    // (0.42 m, policies/dragon_whole_body.md). The episode is not the same on every run: the
+    // robot settles on its wheels while it waits, and the target lands on whichever tick the
+    // peer gets to (0.06, 0.09 and 0.13 m measured). A robot whose goals went astray ends
+    // metres away.
+    assert!(error < 0.42, "{out}");
     drop(launch);
 }
 

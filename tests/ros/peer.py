@@ -394,9 +394,12 @@ def cmd_target(args, peer):
     start, wall = sim(), time.monotonic()
     target.publish(msg)
     peer.spin_until(lambda: sim() >= start + args.drive_seconds, args.timeout)
+    # Every node reports once per wall second: wait for a report from each one heard so far
+    # (and the whole-body node) sent after the drive, not one from before or during it.
     name = f"kumi whole-body node: {r}"
-    statuses.pop(name, None)
-    peer.spin_until(lambda: name in statuses, 3.0)
+    heard = set(statuses) | {name}
+    statuses.clear()
+    peer.spin_until(lambda: heard <= set(statuses), 3.0)
     diagnostics = statuses.get(name, {})
     end = trajectory[-1] if trajectory else None
     return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall,
