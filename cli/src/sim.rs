@@ -6,7 +6,12 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
-use kumi_worlds::{Engine, Layout, SimConfig};
+use kumi_policies::kinematics::ToolKinematics;
+use kumi_policies::observation::{self, Goal, JOINTS};
+use kumi_policies::skill::ArmSkill;
+
+use kumi_runtime::{BackendChoice, SkillPolicy};
+use kumi_worlds::{Engine, Layout, SimConfig, SimWorld};
 use serde::Serialize;
 
 /// Loads and assembles a morphology by shipped name or file path.
@@ -89,11 +94,96 @@ pub struct SimArgs {
     /// Velocity for every wheel module [rad/s], signed so that each drives the base along +x.
     #[arg(long, default_value_t = 0.0)]
     pub wheel_velocity: f64,
+    /// Arm modules that run the frozen skill toward their home tool pose, as the upper level's
+    /// neutral goal would ask (comma-separated, or `all`); the others hold their home angles on
+    /// their servos. Does the robot stand on the skill?
+    #[arg(long, value_delimiter = ',')]
+    pub skill_on: Vec<String>,
+    /// The skill for `--skill-on` (default: the shipped policies/arm_reach.onnx).
+    #[arg(long)]
+    pub skill: Option<std::path::PathBuf>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
     #[command(flatten)]
     pub physics: PhysicsArgs,
+}
+
+/// One arm module driven by the frozen skill toward a fixed goal in its base frame.
+struct SkillDriver {
+    module: String,
+    joints: std::ops::Range<usize>,
+    skill: ArmSkill,
+    policy: SkillPolicy,
+    goal: Goal,
+}
+
+impl SkillDriver {
+    /// Every arm module named in `names` (`all`: every arm module), each with its home tool
+    /// pose as its goal.
+    fn for_modules(
+        model: &RobotModel,
+        world: &dyn SimWorld,
+        names: &[String],
+        skill_path: &std::path::Path,
+        control_hz: f64,
+    ) -> Result<Vec<Self>> {
+        let all = names.iter().any(|n| n == "all");
+        let bytes = std::fs::read(skill_path)
+            .with_context(|| format!("reading the skill {}", skill_path.display()))?;
+        let mut drivers = Vec::new();
+        for name in names.iter().filter(|n| *n != "all") {
+            if model.module(name).is_none() {
+                bail!("--skill-on: {} has no module `{name}`", model.name);
+            }
+        }
+        for m in model.modules.iter().filter(|m| {
+            m.ee_link.is_some()
+                && m.velocity_joints().next().is_none()
+                && (all || names.contains(&m.name))
+        }) {
+            let skill = ArmSkill::new(m, control_hz)?;
+            let policy = SkillPolicy::from_bytes(
+                bytes.clone(),
+                &skill_path.display().to_string(),
+                &skill,
+                BackendChoice::Tract,
+            )?;
+            let home: [f64; JOINTS] = std::array::from_fn(|j| m.home[j]);
+            let pose = ToolKinematics::new(model, m)
+                .map_err(anyhow::Error::msg)?
+                .tool_pose_b(&home);
+            drivers.push(Self {
+                module: m.name.clone(),
+                joints: world.module_range(&m.name)?,
+                skill,
+                policy,
+                goal: Goal {
+                    position_b: pose.translation.vector,
+                    orientation_b: pose.rotation,
+                },
+            });
+        }
+        for name in names.iter().filter(|n| *n != "all") {
+            if !drivers.iter().any(|d| &d.module == name) {
+                bail!(
+                    "--skill-on: `{name}` is not an arm module of {}",
+                    model.name
+                );
+            }
+        }
+        Ok(drivers)
+    }
+
+    /// Observes the module, runs the skill and applies its increments (the arm node's rule).
+    fn act(&mut self, world: &mut dyn SimWorld) -> Result<()> {
+        let (q, qd) = (world.joint_positions(), world.joint_velocities());
+        let at = |v: &[f64]| -> [f64; JOINTS] { std::array::from_fn(|j| v[self.joints.start + j]) };
+        let observation = observation::build(&at(&q), &at(&qd), &self.goal);
+        let action = self.policy.act(&observation)?;
+        world.apply_increments(&self.module, &self.skill.increments(&action))?;
+        Ok(())
+    }
 }
 
 #[derive(Serialize)]
@@ -102,6 +192,8 @@ struct SimReport {
     engine: String,
     config: String,
     seconds: f64,
+    /// Arm modules that ran the frozen skill toward their home tool pose.
+    skill_on: Vec<String>,
     control_steps: u64,
     wall_s: f64,
     realtime_factor: f64,
@@ -137,6 +229,21 @@ pub fn run(args: SimArgs) -> Result<()> {
     {
         world.set_wheel_velocity(&m.name, args.wheel_velocity)?;
     }
+    let skill_path = args
+        .skill
+        .clone()
+        .unwrap_or_else(kumi_runtime::shipped_arm_policy);
+    let mut drivers = if args.skill_on.is_empty() {
+        Vec::new()
+    } else {
+        SkillDriver::for_modules(
+            &model,
+            world.as_ref(),
+            &args.skill_on,
+            &skill_path,
+            config.control_hz,
+        )?
+    };
     let start = world.base_pose().translation.vector;
     let steps = (args.seconds * config.control_hz).round() as u64;
     let (mut max_tilt, mut lowest, mut mount_m, mut mount_rad, mut max_speed) =
@@ -144,6 +251,9 @@ pub fn run(args: SimArgs) -> Result<()> {
     let mut finite = true;
     let wall = Instant::now();
     for _ in 0..steps {
+        for driver in drivers.iter_mut() {
+            driver.act(world.as_mut())?;
+        }
         world.step();
         max_tilt = max_tilt.max(world.base_tilt());
         lowest = lowest.min(world.lowest_collider_z());
@@ -168,6 +278,7 @@ pub fn run(args: SimArgs) -> Result<()> {
         engine: engine.to_string(),
         config: config.label_for(engine),
         seconds: args.seconds,
+        skill_on: drivers.iter().map(|d| d.module.clone()).collect(),
         control_steps: steps,
         wall_s,
         realtime_factor: args.seconds / wall_s,
@@ -189,6 +300,12 @@ pub fn run(args: SimArgs) -> Result<()> {
             "{} for {} s simulated ({} control steps at {} Hz, {} physics {})",
             report.morphology, report.seconds, steps, config.control_hz, engine, report.config
         );
+        if !report.skill_on.is_empty() {
+            println!(
+                "  on the skill        {} (toward their home tool poses)",
+                report.skill_on.join(", ")
+            );
+        }
         println!(
             "  wall time           {:.2} s ({:.1}x real time)",
             wall_s, report.realtime_factor

@@ -57,6 +57,26 @@ fn sim_reports_json() {
 }
 
 #[test]
+fn sim_runs_arm_modules_on_the_skill_and_names_them() {
+    // Dragon's two arm modules on the shipped skill, toward their home tool poses: it stays up.
+    let out = kumi(&["sim", "dragon", "--seconds", "2", "--skill-on", "all", "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["skill_on"], serde_json::json!(["arm0", "leg0"]));
+    assert_eq!(report["finite"], true);
+    assert!(report["max_tilt_rad"].as_f64().unwrap() < 0.3, "{report}");
+    // A module that is not an arm is refused by name.
+    let out = kumi(&["sim", "dragon", "--seconds", "1", "--skill-on", "rear_wheel"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr)
+        .contains("--skill-on: `rear_wheel` is not an arm module of dragon"));
+}
+
+#[test]
 fn sim_refuses_a_nonsense_duration() {
     let out = kumi(&["sim", "arm", "--seconds=-3"]);
     assert!(!out.status.success());
