@@ -59,7 +59,15 @@ fn sim_reports_json() {
 #[test]
 fn sim_runs_arm_modules_on_the_skill_and_names_them() {
     // Dragon's two arm modules on the shipped skill, toward their home tool poses: it stays up.
-    let out = kumi(&["sim", "dragon", "--seconds", "2", "--skill-on", "all", "--json"]);
+    let out = kumi(&[
+        "sim",
+        "dragon",
+        "--seconds",
+        "2",
+        "--skill-on",
+        "all",
+        "--json",
+    ]);
     assert!(
         out.status.success(),
         "{}",
@@ -70,7 +78,14 @@ fn sim_runs_arm_modules_on_the_skill_and_names_them() {
     assert_eq!(report["finite"], true);
     assert!(report["max_tilt_rad"].as_f64().unwrap() < 0.3, "{report}");
     // A module that is not an arm is refused by name.
-    let out = kumi(&["sim", "dragon", "--seconds", "1", "--skill-on", "rear_wheel"]);
+    let out = kumi(&[
+        "sim",
+        "dragon",
+        "--seconds",
+        "1",
+        "--skill-on",
+        "rear_wheel",
+    ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr)
         .contains("--skill-on: `rear_wheel` is not an arm module of dragon"));
