@@ -259,11 +259,19 @@ fn modules_join_by_hand_robots_share_a_domain_duplicates_are_refused_and_a_dead_
     );
     // `second`, a whole robot of its own on the same domain.
     let second = launch(domain, &["minimal", "--robot", "second", "--lockstep"]);
+    let mut last = serde_json::Value::Null;
     for robot in ["first", "second"] {
         let out = send_target(domain, robot, &[]);
         let error = number(&out["position_error_m"]);
         println!("{robot}: tool {error:.4} m from the target");
         assert!(error < 0.121, "{robot}: {out}");
+        last = out;
+    }
+    // Each simulator's time is its robot's own (`/<robot>/clock`): while `second` ran, `first`'s
+    // arm nodes never took its time for a restart of theirs.
+    for module in ["arm0"] {
+        let arm = &last["all_diagnostics"][format!("kumi arm node: first/{module}")];
+        assert_eq!(number(&arm["sim_restarts"]), 0.0, "first/{module}: {arm}");
     }
 
     // A second node for first's arm0, and a second whole-body node for first: refused.

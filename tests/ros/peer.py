@@ -157,7 +157,8 @@ def cmd_observe(args, peer):
     peer.listen(Clock, "/clock")
     peer.listen(DiagnosticArray, "/diagnostics")
     peer.listen(String, f"/{r}/robot_description", qos=LATCHED)
-    wanted = [f"/{r}/{m}/joint_states" for m in arms + wheels] + [f"/{r}/odom", f"/{r}/imu", "/clock", "/diagnostics", f"/{r}/robot_description"]
+    peer.listen(Clock, f"/{r}/clock")
+    wanted = [f"/{r}/{m}/joint_states" for m in arms + wheels] + [f"/{r}/odom", f"/{r}/imu", "/clock", f"/{r}/clock", "/diagnostics", f"/{r}/robot_description"]
     peer.spin_until(lambda: all(k in peer.latest for k in wanted), args.timeout)
     out = {"received": {k: k in peer.latest for k in wanted}}
     out["nodes"] = [f"{ns.rstrip('/')}/{n}" for n, ns in peer.get_node_names_and_namespaces()]
@@ -316,14 +317,14 @@ def cmd_reach(args, peer):
     r, a = args.robot, args.arm
     ee_topic = f"/{r}/{a}/ee_pose"
     peer.listen(PoseStamped, ee_topic)
-    peer.listen(Clock, "/clock")
+    peer.listen(Clock, f"/{r}/clock")
     goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
-    if not peer.spin_until(lambda: ee_topic in peer.latest and (args.wall or "/clock" in peer.latest) and goal.get_subscription_count() > 0, args.timeout):
+    if not peer.spin_until(lambda: ee_topic in peer.latest and (args.wall or f"/{r}/clock" in peer.latest) and goal.get_subscription_count() > 0, args.timeout):
         return {"error": "arm node or bridge not found"}
     if args.wall:  # on hardware there is no /clock: wall time
         sim = time.monotonic
     else:
-        sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
+        sim = lambda: peer.latest[f"/{r}/clock"].clock.sec + peer.latest[f"/{r}/clock"].clock.nanosec * 1e-9
     if args.disturb:
         # Another publisher moves joint2 (issue 10, finding 1; within the skill's start range of
         # +-0.5 rad), and a wild increment arrives: the bridge owns the targets, so neither may
@@ -374,15 +375,15 @@ def cmd_target(args, peer):
 
     peer.create_subscription(PoseStamped, tool_topic, on_tool, DEFAULT)
     peer.listen(PoseStamped, tool_topic)
-    peer.listen(Clock, "/clock")
+    peer.listen(Clock, f"/{r}/clock")
     statuses = latest_diagnostics(peer)
     target = peer.create_publisher(PoseStamped, f"/{r}/goal_pose", DEFAULT)
-    if not peer.spin_until(lambda: (args.wall or "/clock" in peer.latest) and target.get_subscription_count() > 0, args.timeout):
+    if not peer.spin_until(lambda: (args.wall or f"/{r}/clock" in peer.latest) and target.get_subscription_count() > 0, args.timeout):
         return {"error": "whole-body node or bridge not found"}
     if args.wall:  # on hardware there is no /clock: wall time
         sim = time.monotonic
     else:
-        sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
+        sim = lambda: peer.latest[f"/{r}/clock"].clock.sec + peer.latest[f"/{r}/clock"].clock.nanosec * 1e-9
     x, y, z, yaw = [float(v) for v in args.goal.split(",")]
     msg = goal_msg([x, y, z, math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)], args.frame or f"{r}/odom")
     if args.disturb:
@@ -529,7 +530,7 @@ def cmd_flood(args, peer):
     statuses = latest_diagnostics(peer)
     goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
     states = peer.create_publisher(JointState, f"/{r}/{a}/joint_states", DEFAULT)
-    clock = peer.create_publisher(Clock, "/clock", DEFAULT)
+    clock = peer.create_publisher(Clock, f"/{r}/clock", DEFAULT)
     jset = peer.create_publisher(JointState, f"/{r}/{a}/joint_set", DEFAULT)
     inc = peer.create_publisher(Float64MultiArray, f"/{r}/{a}/joint_increments", DEFAULT)
     pubs = (goal, states, clock, jset, inc)
@@ -589,7 +590,7 @@ def cmd_watch(args, peer):
     r, a = args.robot, args.arm
     js_topic = f"/{r}/{a}/joint_states"
     peer.listen(JointState, js_topic)
-    peer.listen(Clock, "/clock")
+    peer.listen(Clock, f"/{r}/clock")
     silent, holds, timeouts, node = set(), 0, 0, {"stale_holds": 0, "messages": []}
 
     def on_diag(m):
@@ -605,9 +606,9 @@ def cmd_watch(args, peer):
             silent.update(v for v in values.get("lockstep_silent", "").split(",") if v)
 
     peer.create_subscription(DiagnosticArray, "/diagnostics", on_diag, DEFAULT)
-    if not peer.spin_until(lambda: "/clock" in peer.latest and js_topic in peer.latest, args.timeout):
+    if not peer.spin_until(lambda: f"/{r}/clock" in peer.latest and js_topic in peer.latest, args.timeout):
         return {"error": "no bridge"}
-    sim = lambda: peer.latest["/clock"].clock.sec + peer.latest["/clock"].clock.nanosec * 1e-9
+    sim = lambda: peer.latest[f"/{r}/clock"].clock.sec + peer.latest[f"/{r}/clock"].clock.nanosec * 1e-9
     start = sim()
     peer.spin_until(lambda: False, args.drive_seconds)
     return {"clock_start": start, "clock_end": sim(), "stale_holds": holds, "lockstep_timeouts": timeouts,

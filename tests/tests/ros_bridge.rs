@@ -64,6 +64,7 @@ fn rclpy_receives_every_topic() {
         ("/dragon/robot_description", "std_msgs/msg/String"),
         ("/tf", "tf2_msgs/msg/TFMessage"),
         ("/clock", "rosgraph_msgs/msg/Clock"),
+        ("/dragon/clock", "rosgraph_msgs/msg/Clock"),
         ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
     ] {
         assert_eq!(types[topic], serde_json::json!([ty]), "{topic}");

@@ -43,7 +43,7 @@ pub enum Output {
 /// Where the node's time comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ClockSource {
-    /// Sim time once a `/clock` message arrives, wall time until then.
+    /// Sim time once a `/<robot>/clock` message arrives, wall time until then.
     Auto,
     Sim,
     Wall,
@@ -267,7 +267,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     let io = Io {
         goal: node.strict_subscription(&topics::goal_pose(robot, module), qos::default())?,
         joint_states: node.strict_subscription(&joint_states_topic, qos::default())?,
-        clock: node.strict_subscription(topics::CLOCK, qos::default())?,
+        clock: node.strict_subscription(&topics::robot_clock(robot), qos::default())?,
         increments: match output {
             Output::Increments => Some(node.publisher(&output_topic, qos::default())?),
             Output::JointSet => None,
@@ -327,7 +327,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                 Err(why) => {
                     report.malformed += 1;
                     if log.check(Instant::now()).is_some() {
-                        warn!("{module}: refused a malformed /clock message: {why}");
+                        warn!("{module}: refused a malformed clock message: {why}");
                     }
                     continue;
                 }
@@ -353,7 +353,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
             // A joint state stamped in the other time base would look ages old (or new).
             prepared.controller.forget_state();
             if sim {
-                info!("{module}: using sim time from /clock");
+                info!("{module}: using sim time from /{robot}/clock");
             }
         }
         let wall_now = start.elapsed().as_secs_f64();

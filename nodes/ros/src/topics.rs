@@ -51,8 +51,15 @@ pub fn robot_description(robot: &str) -> String {
 
 /// `/tf`: `tf2_msgs/TFMessage`.
 pub const TF: &str = "/tf";
-/// `/clock`: `rosgraph_msgs/Clock`, simulated time.
+/// `/clock`: `rosgraph_msgs/Clock`, simulated time, for ROS tools (`use_sim_time`). With two
+/// simulated robots on one domain it carries both simulators' times: kumi's nodes read their own
+/// robot's [`robot_clock`].
 pub const CLOCK: &str = "/clock";
+
+/// `/<robot>/clock`: `rosgraph_msgs/Clock`, the simulated time of this robot's simulator only.
+pub fn robot_clock(robot: &str) -> String {
+    format!("/{robot}/clock")
+}
 /// `/rosout`: `rcl_interfaces/Log`, every node's log records.
 pub const ROSOUT: &str = "/rosout";
 /// `/diagnostics`: `diagnostic_msgs/DiagnosticArray`.

@@ -111,6 +111,7 @@ struct Io {
     imu: Publisher<kumi_msgs::sensor_msgs::Imu>,
     tf: Publisher<kumi_msgs::tf2_msgs::TFMessage>,
     clock: Publisher<Clock>,
+    robot_clock: Publisher<Clock>,
     diagnostics: Publisher<DiagnosticArray>,
     inputs: Vec<ModuleInputs>,
     // Kept alive: the description and the fixed transforms are latched.
@@ -229,6 +230,7 @@ fn open_io(
         imu: node.publisher(&topics::imu(robot), qos::default())?,
         tf: node.publisher(topics::TF, qos::default())?,
         clock: node.publisher(topics::CLOCK, qos::default())?,
+        robot_clock: node.publisher(&topics::robot_clock(robot), qos::default())?,
         diagnostics: node.publisher(topics::DIAGNOSTICS, qos::default())?,
         inputs,
         _description: description,
@@ -452,6 +454,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         let _ = io.imu.publish(state::imu(world, robot, accel_w, stamp));
         let _ = io.tf.publish(state::transforms(world, &tree, robot, stamp));
         let _ = io.clock.publish(Clock { clock: stamp });
+        let _ = io.robot_clock.publish(Clock { clock: stamp });
     };
     publish_state(world.as_ref(), steps, &accel_w);
 
