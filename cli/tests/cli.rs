@@ -10,6 +10,18 @@ fn kumi(args: &[&str]) -> Output {
         .expect("kumi runs")
 }
 
+/// Runs `kumi`, which must succeed (its stderr is the failure message), and parses its stdout
+/// as JSON.
+fn kumi_json<T: serde::de::DeserializeOwned>(args: &[&str]) -> T {
+    let out = kumi(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 #[test]
 fn urdf_prints_a_complete_robot() {
     let out = kumi(&["urdf", "tricycle"]);
@@ -43,13 +55,7 @@ fn a_bad_morphology_file_is_one_clear_line_and_a_failure_code() {
 
 #[test]
 fn sim_reports_json() {
-    let out = kumi(&["sim", "dragon", "--seconds", "2", "--json"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let report: serde_json::Value = kumi_json(&["sim", "dragon", "--seconds", "2", "--json"]);
     assert_eq!(report["morphology"], "dragon");
     assert_eq!(report["control_steps"], 60);
     assert_eq!(report["finite"], true);
@@ -59,7 +65,7 @@ fn sim_reports_json() {
 #[test]
 fn sim_runs_arm_modules_on_the_skill_and_names_them() {
     // Dragon's two arm modules on the shipped skill, toward their home tool poses: it stays up.
-    let out = kumi(&[
+    let report: serde_json::Value = kumi_json(&[
         "sim",
         "dragon",
         "--seconds",
@@ -68,12 +74,6 @@ fn sim_runs_arm_modules_on_the_skill_and_names_them() {
         "all",
         "--json",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(report["skill_on"], serde_json::json!(["arm0", "leg0"]));
     assert_eq!(report["finite"], true);
     assert!(report["max_tilt_rad"].as_f64().unwrap() < 0.3, "{report}");
@@ -100,7 +100,7 @@ fn sim_refuses_a_nonsense_duration() {
 
 #[test]
 fn bench_sim_json_has_the_documented_records() {
-    let out = kumi(&[
+    let records: Vec<serde_json::Value> = kumi_json(&[
         "bench",
         "sim",
         "--json",
@@ -111,12 +111,6 @@ fn bench_sim_json_has_the_documented_records() {
         "--worlds",
         "2",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let records: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(
         records.len(),
         2,
@@ -230,7 +224,7 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         "{csv}"
     );
     let policy = out_dir.join("minimal_whole_body.onnx");
-    let eval = kumi(&[
+    let v: serde_json::Value = kumi_json(&[
         "eval",
         "whole-body",
         "minimal",
@@ -242,12 +236,6 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         "tract",
         "--json",
     ]);
-    assert!(
-        eval.status.success(),
-        "{}",
-        String::from_utf8_lossy(&eval.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
     assert_eq!(v["rollouts"], 2);
     assert_eq!(v["robot"], "minimal");
     for key in ["position_error_m", "yaw_error_rad", "contacts_per_episode"] {
@@ -441,11 +429,11 @@ fn urdf_mjcf_prints_the_mujoco_model() {
 
 #[cfg(feature = "mujoco")]
 mod mujoco {
-    use super::kumi;
+    use super::kumi_json;
 
     #[test]
     fn sim_runs_on_mujoco_and_says_so() {
-        let out = kumi(&[
+        let report: serde_json::Value = kumi_json(&[
             "sim",
             "dragon",
             "--engine",
@@ -454,12 +442,6 @@ mod mujoco {
             "2",
             "--json",
         ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         assert_eq!(report["engine"], "mujoco");
         assert_eq!(report["config"], "mujoco/4sub");
         assert_eq!(report["finite"], true);
@@ -467,7 +449,7 @@ mod mujoco {
 
     #[test]
     fn bench_interleaves_engines() {
-        let out = kumi(&[
+        let records: Vec<serde_json::Value> = kumi_json(&[
             "bench",
             "sim",
             "--json",
@@ -480,12 +462,6 @@ mod mujoco {
             "--engines",
             "rapier,mujoco",
         ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let records: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
         let engines: Vec<&str> = records
             .iter()
             .map(|r| r["engine"].as_str().unwrap())
@@ -495,7 +471,7 @@ mod mujoco {
 
     #[test]
     fn eval_reports_each_engine() {
-        let out = kumi(&[
+        let v: Vec<serde_json::Value> = kumi_json(&[
             "eval",
             "arm",
             "--rollouts",
@@ -506,12 +482,6 @@ mod mujoco {
             "rapier,mujoco",
             "--json",
         ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let v: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
         assert_eq!(v.len(), 2);
         assert_eq!(
             (v[0]["engine"].as_str(), v[1]["engine"].as_str()),
@@ -546,13 +516,7 @@ fn the_example_morphology_stands_and_its_whole_body_task_builds() {
     // examples/caterpillar.toml: a robot kumi does not ship, from the shipped modules, no code.
     let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
     let morphology = format!("{root}/examples/caterpillar.toml");
-    let out = kumi(&["sim", &morphology, "--seconds", "2", "--json"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let report: serde_json::Value = kumi_json(&["sim", &morphology, "--seconds", "2", "--json"]);
     assert_eq!(report["morphology"], "caterpillar");
     assert!(report["max_tilt_rad"].as_f64().unwrap() < 0.1, "{report}");
     let config = format!("{root}/examples/caterpillar_whole_body.toml");
