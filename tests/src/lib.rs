@@ -341,6 +341,7 @@ pub fn whole_body_config(
             w_v: 1e-4,
             w_a: 0.005,
             alive: 0.2,
+            fall: 0.0,
         },
         penalty: Default::default(),
         arms: kumi_train::whole_body::ArmControl::Skill(bounds),

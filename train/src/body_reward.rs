@@ -26,6 +26,15 @@ pub struct BodyWeights {
     pub w_a: f64,
     /// Reward per step for staying up (the paper: 0.2 for Minimal, none for the others).
     pub alive: f64,
+    /// Penalty on the step the base tilts past the limit (kumi's; the paper has none). Absent
+    /// in a config: 0, and left out of the serialised config, so older policies' config
+    /// fingerprints still hold.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub fall: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// The penalty baseline's extra terms (the paper's Eqs. 5 and 6; `[penalty]` of a whole-body
@@ -54,6 +63,8 @@ pub struct BodyTerms {
     pub joint_velocity: f64,
     pub action_rate: f64,
     pub alive: f64,
+    /// The fall penalty (0 on every step but the one that falls).
+    pub fall: f64,
     /// Eq. 5 (penalty baseline only).
     pub leg_orientation: f64,
     /// Eq. 6 (penalty baseline only).
@@ -68,6 +79,7 @@ impl BodyTerms {
             + self.joint_velocity
             + self.action_rate
             + self.alive
+            + self.fall
             + self.leg_orientation
             + self.contact
     }
@@ -80,6 +92,15 @@ pub fn leg_orientation_reward(w_ori: f64, leg_angles_rad: &[f64]) -> f64 {
         0.0
     } else {
         w_ori * (-leg_angles_rad.iter().sum::<f64>()).exp()
+    }
+}
+
+/// `-w_fall` on the step the robot falls, else 0.
+pub fn fall_penalty(w_fall: f64, fell: bool) -> f64 {
+    if fell {
+        -w_fall
+    } else {
+        0.0
     }
 }
 
@@ -141,6 +162,7 @@ mod tests {
         w_v: 0.01,
         w_a: 0.1,
         alive: 0.2,
+        fall: 0.0,
     };
 
     #[test]
@@ -177,6 +199,14 @@ mod tests {
         };
         assert_eq!(t.total(), 0.5);
         assert!(!PenaltyWeights::default().any());
+        assert_eq!(fall_penalty(20.0, true), -20.0);
+        assert_eq!(fall_penalty(20.0, false), 0.0);
+        let t = BodyTerms {
+            alive: 0.2,
+            fall: -20.0,
+            ..BodyTerms::default()
+        };
+        assert_eq!(t.total(), -19.8);
     }
 
     #[test]

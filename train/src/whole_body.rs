@@ -26,8 +26,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::arm_reach::EnvError;
 use crate::body_reward::{
-    body_terms, contact_penalty, fallen, leg_orientation_reward, BodyTerms, BodyWeights,
-    PenaltyWeights,
+    body_terms, contact_penalty, fall_penalty, fallen, leg_orientation_reward, BodyTerms,
+    BodyWeights, PenaltyWeights,
 };
 use crate::evaluate_body::{leg_angles, ContactRule};
 
@@ -403,11 +403,12 @@ impl WholeBody {
         );
         self.add_penalties(&mut terms);
         self.previous_action.copy_from_slice(action);
-        let terminated = self.world.diverged()
-            || fallen(
-                &self.world.base_pose().rotation,
-                self.config.task.tilt_limit_rad,
-            );
+        let fell = fallen(
+            &self.world.base_pose().rotation,
+            self.config.task.tilt_limit_rad,
+        );
+        terms.fall = fall_penalty(self.config.weights.fall, fell);
+        let terminated = self.world.diverged() || fell;
         BodyStep {
             observation: self.observation(),
             reward: terms.total(),

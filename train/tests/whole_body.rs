@@ -41,6 +41,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             w_v: 1e-4,
             w_a: 0.005,
             alive: 0.0,
+            fall: 0.0,
         },
         penalty: PenaltyWeights::default(),
         arms: ArmControl::Skill(GoalBounds {
@@ -229,6 +230,22 @@ fn a_tilt_past_the_limit_terminates() {
     env.reset();
     let step = env.step(&[0.0; 21]);
     assert!(step.terminated);
+    assert_eq!(step.terms.fall, 0.0, "no fall weight, no fall penalty");
+
+    // With a fall weight, the falling step carries it, and a standing step does not.
+    let mut weighted = config(1e-9);
+    weighted.weights.fall = 20.0;
+    let mut env = WholeBody::new(model("tricycle"), weighted.clone(), &skill(), 3).unwrap();
+    env.reset();
+    let step = env.step(&[0.0; 21]);
+    assert!(step.terminated);
+    assert_eq!(step.terms.fall, -20.0);
+    weighted.task.tilt_limit_rad = 1.0;
+    let mut env = WholeBody::new(model("tricycle"), weighted, &skill(), 3).unwrap();
+    env.reset();
+    let step = env.step(&[0.0; 21]);
+    assert!(!step.terminated);
+    assert_eq!(step.terms.fall, 0.0);
 }
 
 #[test]

@@ -165,6 +165,7 @@ pub fn assemble(morphology: &Morphology, library: &ModuleLibrary) -> RobotModel 
             joint.name = p(&joint.name);
             joint.parent.link = p(&joint.parent.link);
             joint.child.link = p(&joint.child.link);
+            joint.limit.effort *= entry.effort_scale;
             joints.push(joint);
         }
         for c in &module.contacts {
@@ -245,6 +246,7 @@ pub fn assemble(morphology: &Morphology, library: &ModuleLibrary) -> RobotModel 
             .iter()
             .map(|a| Actuator {
                 joint: p(&a.joint),
+                effort_limit: a.effort_limit * entry.effort_scale,
                 ..a.clone()
             })
             .collect();

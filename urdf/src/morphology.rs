@@ -68,6 +68,9 @@ pub struct MorphologyModule {
     /// Home position of each position-controlled joint [rad], in module order.
     pub home: Vec<f64>,
     pub options: Vec<String>,
+    /// Factor on every joint's torque limit (URDF `<limit effort>`) of this module: a module
+    /// built with a stronger gearbox than its kind's default. 1 unless the file says otherwise.
+    pub effort_scale: f64,
 }
 
 /// A validated morphology.
@@ -105,6 +108,7 @@ struct RawModule {
     home: Option<Vec<f64>>,
     #[serde(default)]
     options: Vec<String>,
+    effort_scale: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -245,6 +249,16 @@ impl Morphology {
                     ));
                 }
             }
+            let effort_scale = m.effort_scale.unwrap_or(1.0);
+            if !(effort_scale.is_finite() && (0.1..=10.0).contains(&effort_scale)) {
+                return Err(ModelError::new(
+                    file,
+                    at("effort_scale"),
+                    Problem::BadValue(format!(
+                        "{effort_scale} is not a torque-limit factor in [0.1, 10]"
+                    )),
+                ));
+            }
             let mount = match m.mount {
                 None => None,
                 Some(raw_mount) => {
@@ -289,6 +303,7 @@ impl Morphology {
                 mount,
                 home,
                 options: m.options,
+                effort_scale,
             });
         }
         validate_tree(file, &modules, library)?;

@@ -296,3 +296,40 @@ fn a_mujoco_step_is_read_and_zero_refused() {
     assert_eq!(err.field, "physics.mujoco_substeps");
     assert!(err.to_string().contains("at least 1"), "{err}");
 }
+
+#[test]
+fn an_effort_scale_multiplies_that_modules_torque_limits_only() {
+    let text = BASE.replace(
+        "role = \"manipulator\"",
+        "role = \"manipulator\"\neffort_scale = 3.0",
+    );
+    let library = ModuleLibrary::shipped();
+    let scaled = kumi_model::assemble(&Morphology::parse(FILE, &text, &library).unwrap(), &library);
+    let plain = kumi_model::assemble(&Morphology::parse(FILE, BASE, &library).unwrap(), &library);
+    let arm = |m: &kumi_model::RobotModel| m.module("a").unwrap().actuators.clone();
+    for (s, p) in arm(&scaled).iter().zip(arm(&plain).iter()) {
+        assert_eq!(s.effort_limit, 3.0 * p.effort_limit, "{}", s.joint);
+    }
+    let wheel = |m: &kumi_model::RobotModel| m.module("w").unwrap().actuators.clone();
+    assert_eq!(wheel(&scaled), wheel(&plain));
+    // The URDF says the same, so both engines and the fingerprint see it.
+    let urdf_effort = |m: &kumi_model::RobotModel| {
+        m.urdf
+            .joints
+            .iter()
+            .find(|j| j.name == "a/joint2")
+            .unwrap()
+            .limit
+            .effort
+    };
+    assert_eq!(urdf_effort(&scaled), 3.0 * urdf_effort(&plain));
+
+    for bad in ["0.0", "-1.0", "nan", "11.0"] {
+        let err = parse(&BASE.replace(
+            "role = \"manipulator\"",
+            &format!("role = \"manipulator\"\neffort_scale = {bad}"),
+        ));
+        assert_eq!(err.field, "module[1].effort_scale", "{bad}");
+        assert!(err.to_string().contains("torque-limit factor"), "{err}");
+    }
+}

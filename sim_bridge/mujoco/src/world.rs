@@ -14,15 +14,13 @@ use nalgebra::{Isometry3, Matrix3, Translation3, Vector3};
 
 use crate::geometry::{lowest_z, GeomShape};
 use crate::mjcf::{self, quat_wxyz, GROUND_GEOM};
-use crate::servo::{servo_force, ServoForce};
+use crate::servo::servo_command;
 
 /// One actuated joint in MuJoCo's arrays.
 #[derive(Debug, Clone, Copy)]
 struct ServoJoint {
     qpos: usize,
     dof: usize,
-    /// Index of the dof's diagonal entry in MuJoCo's sparse inertia `M`.
-    m_diag: usize,
     /// The joint's own (passive) damping [N m s/rad].
     joint_damping: f64,
 }
@@ -35,7 +33,6 @@ struct MujocoState {
     config: SimConfig,
     physics: Box<[f64]>,
     servos: Vec<ServoState>,
-    saturated: Vec<bool>,
     time_s: f64,
 }
 
@@ -57,9 +54,6 @@ pub struct MujocoWorld {
     ground_geom: usize,
     joints: Vec<ServoJoint>,
     servos: ServoBank,
-    /// Whether each servo ran at its effort limit in the last physics step (its damping is
-    /// then off).
-    saturated: Vec<bool>,
     base_link: usize,
     time_s: f64,
     /// MuJoCo reported a bad acceleration (and reset itself) since the last reset.
@@ -124,13 +118,11 @@ impl MujocoWorld {
                 Ok(ServoJoint {
                     qpos: mj.jnt_qposadr()[j] as usize,
                     dof,
-                    m_diag: (mj.m_rowadr()[dof] + mj.m_rownnz()[dof] - 1) as usize,
                     joint_damping: a.joint_damping,
                 })
             })
             .collect::<Result<Vec<_>, SimError>>()?;
         let base_link = tree.root();
-        let n = joints.len();
         let mut world = Self {
             data: MjData::new(Box::new(mj)),
             model,
@@ -142,7 +134,6 @@ impl MujocoWorld {
             ground_geom,
             joints,
             servos,
-            saturated: vec![false; n],
             base_link,
             time_s: 0.0,
             diverged: false,
@@ -160,66 +151,35 @@ impl MujocoWorld {
         )
     }
 
-    /// Sets each servo's damping for the coming physics step: its own, plus the servo's PD
-    /// damping unless it runs at its effort limit.
+    /// Sets each dof's damping to its own plus the servo's at rest (a reset's starting point;
+    /// every physics step sets it again).
     fn set_damping(&mut self) {
         let dt = self.config.mujoco_dt();
         // SAFETY: only the per-dof damping values change; the model's layout does not.
         let damping = unsafe { self.data.model_mut() }.dof_damping_mut();
         for (i, j) in self.joints.iter().enumerate() {
             let a = &self.servos.actuators()[i];
-            damping[j.dof] = j.joint_damping
-                + if self.saturated[i] {
-                    0.0
-                } else {
-                    a.damping + dt * a.stiffness
-                };
+            damping[j.dof] = j.joint_damping + a.damping + dt * a.stiffness;
         }
     }
 
-    /// One physics step: positions and velocities forward (MuJoCo `mj_step1`), kumi's servo
-    /// law on the fresh inertia and forces, then the rest of the step (`mj_step2`).
+    /// One physics step: kumi's servo law on the step's starting state (each servo's spring as
+    /// a joint force, its damping as the dof's, which MuJoCo integrates implicitly), then
+    /// MuJoCo's step.
     fn physics_step(&mut self) {
         let dt = self.config.mujoco_dt();
-        self.set_damping();
-        self.data.step1();
         for i in 0..self.joints.len() {
             let j = self.joints[i];
             let q = self.data.qpos()[j.qpos];
             let v = self.data.qvel()[j.dof];
             let target = self.servos.advance(i, q, dt);
-            let a = &self.servos.actuators()[i];
-            let servo_damping = if self.saturated[i] {
-                0.0
-            } else {
-                a.damping + dt * a.stiffness
-            };
-            // Forces on the dof other than this servo's: passive (less the servo damping
-            // MuJoCo already added) minus bias (gravity, Coriolis).
-            let other =
-                self.data.qfrc_passive()[j.dof] + servo_damping * v - self.data.qfrc_bias()[j.dof];
-            let inertia = self.data.m()[j.m_diag];
-            let force = servo_force(a, target, q, v, other, inertia, dt);
-            let (applied, saturated) = match force {
-                ServoForce::Tracking { spring } => (spring, false),
-                ServoForce::Saturated { effort } => (effort, true),
-            };
-            // The damping MuJoCo integrates implicitly was set before mj_step1; if the servo
-            // changed regime, correct the explicit part it already computed.
-            let new_damping = if saturated {
-                0.0
-            } else {
-                a.damping + dt * a.stiffness
-            };
-            self.data.qfrc_applied_mut()[j.dof] = applied + (servo_damping - new_damping) * v;
-            if saturated != self.saturated[i] {
-                self.saturated[i] = saturated;
-                // SAFETY: only a damping value changes.
-                unsafe { self.data.model_mut() }.dof_damping_mut()[j.dof] =
-                    j.joint_damping + new_damping;
-            }
+            let command = servo_command(&self.servos.actuators()[i], target, q, v, dt);
+            self.data.qfrc_applied_mut()[j.dof] = command.spring;
+            // SAFETY: only a damping value changes; the model's layout does not.
+            unsafe { self.data.model_mut() }.dof_damping_mut()[j.dof] =
+                j.joint_damping + command.damping;
         }
-        self.data.step2();
+        self.data.step();
         // MuJoCo counts bad accelerations (after restarting from its initial state).
         if self.data.warning()[MjtWarning::mjWARN_BADQACC as usize].number > 0 {
             self.diverged = true;
@@ -304,7 +264,6 @@ impl SimWorld for MujocoWorld {
             self.data.qpos_mut()[j.qpos] = q;
         }
         self.servos.hold(&state.joint_positions);
-        self.saturated.fill(false);
         self.set_damping();
         self.data.forward();
         self.time_s = 0.0;
@@ -317,7 +276,6 @@ impl SimWorld for MujocoWorld {
             config: self.config,
             physics: self.data.state(STATE_SPEC),
             servos: self.servos.states().to_vec(),
-            saturated: self.saturated.clone(),
             time_s: self.time_s,
         })
     }
@@ -334,7 +292,6 @@ impl SimWorld for MujocoWorld {
             .set_state(&s.physics, STATE_SPEC)
             .map_err(|_| SimError::ForeignSnapshot)?;
         self.servos.restore(&s.servos);
-        self.saturated.clone_from(&s.saturated);
         self.time_s = s.time_s;
         self.set_damping();
         self.data.forward();
