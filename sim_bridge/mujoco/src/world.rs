@@ -28,8 +28,9 @@ struct ServoJoint {
 /// MuJoCo's state plus kumi's servo state: everything a snapshot restores.
 #[derive(Clone)]
 struct MujocoState {
-    /// The world it was taken from: the robot model (by identity) and the settings.
-    model: usize,
+    /// The world it was taken from: the robot model (by identity: held, so that its address
+    /// cannot be reused by another model while the snapshot lives) and the settings.
+    model: Arc<RobotModel>,
     config: SimConfig,
     physics: Box<[f64]>,
     servos: Vec<ServoState>,
@@ -272,7 +273,7 @@ impl SimWorld for MujocoWorld {
 
     fn snapshot(&self) -> Snapshot {
         Snapshot::new(MujocoState {
-            model: Arc::as_ptr(&self.model) as usize,
+            model: Arc::clone(&self.model),
             config: self.config,
             physics: self.data.state(STATE_SPEC),
             servos: self.servos.states().to_vec(),
@@ -282,7 +283,7 @@ impl SimWorld for MujocoWorld {
 
     fn restore(&mut self, snapshot: &Snapshot) -> Result<(), SimError> {
         let s = snapshot.downcast::<MujocoState>()?;
-        if s.model != Arc::as_ptr(&self.model) as usize
+        if !Arc::ptr_eq(&s.model, &self.model)
             || s.config != self.config
             || s.physics.len() != self.data.model().state_size(STATE_SPEC)
         {

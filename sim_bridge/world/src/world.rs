@@ -17,8 +17,9 @@ use crate::spawn::{link_pose, place_body, spawn, ArticulatedJoint, LinkBody};
 /// Everything needed to restore rapier's physics exactly as it was.
 #[derive(Clone)]
 struct RapierState {
-    /// The world it was taken from: the robot model (by identity) and the settings.
-    model: usize,
+    /// The world it was taken from: the robot model (by identity: held, so that its address
+    /// cannot be reused by another model while the snapshot lives) and the settings.
+    model: Arc<RobotModel>,
     config: SimConfig,
     islands: IslandManager,
     broad_phase: BroadPhaseBvh,
@@ -41,7 +42,7 @@ impl RapierState {
         time_s: f64,
     ) -> Self {
         Self {
-            model: Arc::as_ptr(model) as usize,
+            model: Arc::clone(model),
             config,
             islands: physics.islands.clone(),
             broad_phase: physics.broad_phase.clone(),
@@ -254,7 +255,7 @@ impl SimWorld for World {
 
     fn restore(&mut self, snapshot: &Snapshot) -> Result<(), SimError> {
         let state = snapshot.downcast::<RapierState>()?.clone();
-        if state.model != Arc::as_ptr(&self.model) as usize || state.config != self.config {
+        if !Arc::ptr_eq(&state.model, &self.model) || state.config != self.config {
             return Err(SimError::ForeignSnapshot);
         }
         self.restore_owned(state);
