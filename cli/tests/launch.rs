@@ -368,9 +368,6 @@ fn reach_on_mujoco(robot: &str, arm_modules: &[&str]) -> (serde_json::Value, f64
 }
 
 #[test]
-#[ignore = "stalls when another test of this binary runs beside it (peer past its 120 s deadline; \
-            passes alone: `cargo test --workspace --all-features --test launch -- --ignored a_launched_dragon`); \
-            since MuJoCo's servo law changed, cause not yet found"]
 fn a_launched_dragon_reaches_a_target_from_rclpy_on_mujoco() {
     let _one = one_at_a_time();
     // Dragon turns by steering its rear wheel module. Both arm modules get every goal (the leg's

@@ -149,6 +149,9 @@ pub fn peer_in(
         .stderr(Stdio::piped())
         .spawn()
         .expect("start the rclpy peer");
+    // Both pipes are drained as the peer runs, so that a chatty peer never blocks on a full pipe.
+    let stdout = drain(child.stdout.take().unwrap());
+    let stderr = drain(child.stderr.take().unwrap());
     let start = Instant::now();
     let status = loop {
         if let Some(status) = child.try_wait().unwrap() {
@@ -157,28 +160,18 @@ pub fn peer_in(
         if start.elapsed() > deadline {
             let _ = child.kill();
             let _ = child.wait();
+            let said = stderr.join().unwrap_or_default();
             panic!(
-                "rclpy peer `{}` ran past its {:?} deadline",
+                "rclpy peer `{}` ran past its {:?} deadline; its stderr:\n{}",
                 args.join(" "),
-                deadline
+                deadline,
+                tail(&said, 4000)
             );
         }
         std::thread::sleep(Duration::from_millis(20));
     };
-    let mut stdout = String::new();
-    let mut stderr = String::new();
-    child
-        .stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut stdout)
-        .unwrap();
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut stderr)
-        .unwrap();
+    let stdout = stdout.join().unwrap_or_default();
+    let stderr = stderr.join().unwrap_or_default();
     assert!(
         status.success(),
         "rclpy peer `{}` failed: {status}\n{stderr}",
@@ -187,6 +180,15 @@ pub fn peer_in(
     let last = stdout.lines().last().unwrap_or_default();
     serde_json::from_str(last)
         .unwrap_or_else(|e| panic!("peer printed no JSON ({e}):\n{stdout}\n{stderr}"))
+}
+
+/// Reads `pipe` to its end on a thread of its own; the text, lossily decoded.
+fn drain(mut pipe: impl Read + Send + 'static) -> JoinHandle<String> {
+    std::thread::spawn(move || {
+        let mut bytes = Vec::new();
+        let _ = pipe.read_to_end(&mut bytes);
+        String::from_utf8_lossy(&bytes).into_owned()
+    })
 }
 
 /// The ONNX Runtime shared library from the PyPI `onnxruntime` wheel in `target/rosvenv`
@@ -508,9 +510,31 @@ impl KumiProcess {
 }
 
 impl Drop for KumiProcess {
+    /// Kills the process. When the test is failing, its log's tail goes to stderr and the file
+    /// is kept (its path printed), so that a failure on CI says what the nodes saw.
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
-        let _ = std::fs::remove_file(&self.log);
+        if std::thread::panicking() {
+            let log = self.log();
+            eprintln!("{} (log kept at {})", tail(&log, 6000), self.log.display());
+        } else {
+            let _ = std::fs::remove_file(&self.log);
+        }
+    }
+}
+
+/// The last `max_bytes` of `text` (from a line start where possible).
+fn tail(text: &str, max_bytes: usize) -> &str {
+    if text.len() <= max_bytes {
+        return text;
+    }
+    let mut start = text.len() - max_bytes;
+    while !text.is_char_boundary(start) {
+        start += 1;
+    }
+    match text[start..].find('\n') {
+        Some(i) => &text[start + i + 1..],
+        None => &text[start..],
     }
 }
