@@ -5,12 +5,13 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
+use kumi_model::{assemble, load_morphology, ModuleInstance, ModuleLibrary, RobotModel, Role};
 use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::{self, Goal, JOINTS};
 use kumi_policies::skill::ArmSkill;
 
 use kumi_runtime::{BackendChoice, SkillPolicy};
+use kumi_terms::{ArmGoalTerm, GoalBounds};
 use kumi_worlds::{Engine, Layout, SimConfig, SimWorld};
 use serde::Serialize;
 
@@ -102,6 +103,11 @@ pub struct SimArgs {
     /// The skill for `--skill-on` (default: the shipped policies/arm_reach.onnx).
     #[arg(long)]
     pub skill: Option<std::path::PathBuf>,
+    /// Legs on the skill are asked to roll their tools by this angle [rad] about the tool's own
+    /// x axis, by the whole-body leg term's rule (the roll that steers a wheel module at a leg's
+    /// tip). The report says how far each module's tool ends from its goal.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub leg_roll: f64,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -115,18 +121,32 @@ struct SkillDriver {
     joints: std::ops::Range<usize>,
     skill: ArmSkill,
     policy: SkillPolicy,
+    kinematics: ToolKinematics,
     goal: Goal,
+}
+
+/// How far a skill-driven module's tool ended from its goal.
+#[derive(Serialize)]
+struct Tracking {
+    module: String,
+    /// Distance from the tool to its goal position [m].
+    position_error_m: f64,
+    /// Angle between the tool's orientation and its goal's [rad].
+    orientation_error_rad: f64,
+    /// The module's joint angles at the end [rad].
+    joints_rad: [f64; JOINTS],
 }
 
 impl SkillDriver {
     /// Every arm module named in `names` (`all`: every arm module), each with its home tool
-    /// pose as its goal.
+    /// pose as its goal, a leg's rolled by `leg_roll_rad` about its tool's x axis.
     fn for_modules(
         model: &RobotModel,
         world: &dyn SimWorld,
         names: &[String],
         skill_path: &std::path::Path,
         control_hz: f64,
+        leg_roll_rad: f64,
     ) -> Result<Vec<Self>> {
         let all = names.iter().any(|n| n == "all");
         let bytes = std::fs::read(skill_path)
@@ -149,19 +169,13 @@ impl SkillDriver {
                 &skill,
                 BackendChoice::Tract,
             )?;
-            let home: [f64; JOINTS] = std::array::from_fn(|j| m.home[j]);
-            let pose = ToolKinematics::new(model, m)
-                .map_err(anyhow::Error::msg)?
-                .tool_pose_b(&home);
             drivers.push(Self {
                 module: m.name.clone(),
                 joints: world.module_range(&m.name)?,
                 skill,
                 policy,
-                goal: Goal {
-                    position_b: pose.translation.vector,
-                    orientation_b: pose.rotation,
-                },
+                kinematics: ToolKinematics::new(model, m).map_err(anyhow::Error::msg)?,
+                goal: goal_for(model, m, leg_roll_rad)?,
             });
         }
         for name in names.iter().filter(|n| *n != "all") {
@@ -178,12 +192,45 @@ impl SkillDriver {
     /// Observes the module, runs the skill and applies its increments (the arm node's rule).
     fn act(&mut self, world: &mut dyn SimWorld) -> Result<()> {
         let (q, qd) = (world.joint_positions(), world.joint_velocities());
-        let at = |v: &[f64]| -> [f64; JOINTS] { std::array::from_fn(|j| v[self.joints.start + j]) };
-        let observation = observation::build(&at(&q), &at(&qd), &self.goal);
+        let observation = observation::build(&self.at(&q), &self.at(&qd), &self.goal);
         let action = self.policy.act(&observation)?;
         world.apply_increments(&self.module, &self.skill.increments(&action))?;
         Ok(())
     }
+
+    /// This module's values of a whole-robot joint vector.
+    fn at(&self, v: &[f64]) -> [f64; JOINTS] {
+        std::array::from_fn(|j| v[self.joints.start + j])
+    }
+
+    /// Where the tool is now against its goal.
+    fn tracking(&self, world: &dyn SimWorld) -> Tracking {
+        let q = self.at(&world.joint_positions());
+        let tool = self.kinematics.tool_pose_b(&q);
+        Tracking {
+            module: self.module.clone(),
+            position_error_m: (tool.translation.vector - self.goal.position_b).norm(),
+            orientation_error_rad: tool.rotation.angle_to(&self.goal.orientation_b),
+            joints_rad: q,
+        }
+    }
+}
+
+/// The goal of an arm module on the skill in `kumi sim`: its home tool pose, a leg's rolled by
+/// `leg_roll_rad` through the whole-body leg term (so the rule is the one training uses).
+fn goal_for(model: &RobotModel, module: &ModuleInstance, leg_roll_rad: f64) -> Result<Goal> {
+    let bounds = GoalBounds {
+        manipulator_position_m: 0.0,
+        manipulator_rotation_rad: 0.0,
+        leg_position_m: 0.0,
+        leg_roll_rad: leg_roll_rad.abs(),
+    };
+    let term = ArmGoalTerm::new(model, module, &bounds)?;
+    let mut action = vec![0.0_f32; term.width()];
+    if term.role == Role::Leg {
+        action[3] = leg_roll_rad.signum() as f32;
+    }
+    Ok(term.goal(&action))
 }
 
 #[derive(Serialize)]
@@ -194,6 +241,10 @@ struct SimReport {
     seconds: f64,
     /// Arm modules that ran the frozen skill toward their home tool pose.
     skill_on: Vec<String>,
+    /// Roll asked of the legs on the skill [rad].
+    leg_roll_rad: f64,
+    /// Each skill-driven module's tool against its goal at the end.
+    skill_tracking: Vec<Tracking>,
     control_steps: u64,
     wall_s: f64,
     realtime_factor: f64,
@@ -214,6 +265,12 @@ pub fn run(args: SimArgs) -> Result<()> {
         bail!(
             "--seconds must be a positive number of seconds, got {}",
             args.seconds
+        );
+    }
+    if !(args.leg_roll.is_finite() && args.leg_roll.abs() <= std::f64::consts::PI) {
+        bail!(
+            "--leg-roll must be an angle in [-pi, pi] rad, got {}",
+            args.leg_roll
         );
     }
     let model = load_model(&args.morphology)?;
@@ -242,6 +299,7 @@ pub fn run(args: SimArgs) -> Result<()> {
             &args.skill_on,
             &skill_path,
             config.control_hz,
+            args.leg_roll,
         )?
     };
     let start = world.base_pose().translation.vector;
@@ -279,6 +337,8 @@ pub fn run(args: SimArgs) -> Result<()> {
         config: config.label_for(engine),
         seconds: args.seconds,
         skill_on: drivers.iter().map(|d| d.module.clone()).collect(),
+        leg_roll_rad: args.leg_roll,
+        skill_tracking: drivers.iter().map(|d| d.tracking(world.as_ref())).collect(),
         control_steps: steps,
         wall_s,
         realtime_factor: args.seconds / wall_s,
@@ -302,9 +362,16 @@ pub fn run(args: SimArgs) -> Result<()> {
         );
         if !report.skill_on.is_empty() {
             println!(
-                "  on the skill        {} (toward their home tool poses)",
-                report.skill_on.join(", ")
+                "  on the skill        {} (toward their home tool poses, legs rolled {} rad)",
+                report.skill_on.join(", "),
+                report.leg_roll_rad
             );
+            for t in &report.skill_tracking {
+                println!(
+                    "    {:<8} tool {:.4} m, {:.3} rad from its goal; joints {:.2?} rad",
+                    t.module, t.position_error_m, t.orientation_error_rad, t.joints_rad
+                );
+            }
         }
         println!(
             "  wall time           {:.2} s ({:.1}x real time)",

@@ -92,6 +92,41 @@ fn sim_runs_arm_modules_on_the_skill_and_names_them() {
 }
 
 #[test]
+fn tricycle_rolls_its_legs_through_the_whole_policy_range_standing() {
+    // The whole-body policy rolls each leg's tool up to +-1.5 rad about its x axis to steer the
+    // wheel modules (train/configs/whole_body/tricycle.toml). The legs' home tip rolls must leave
+    // joint7 room for that: from the first home (leg1 and leg2 at +-120 deg) the skill swung
+    // joint7 the long way round and the robot tipped over (urdf/morphologies/tricycle.toml).
+    for roll in ["--leg-roll=1.5", "--leg-roll=-1.5"] {
+        let report: serde_json::Value = kumi_json(&[
+            "sim",
+            "tricycle",
+            "--seconds",
+            "8",
+            "--skill-on",
+            "all",
+            roll,
+            "--json",
+        ]);
+        assert!(
+            report["max_tilt_rad"].as_f64().unwrap() < 0.3,
+            "{roll}: {report}"
+        );
+        let legs = report["skill_tracking"].as_array().unwrap();
+        assert_eq!(legs.len(), 4, "{report}");
+        for t in legs {
+            // Measured 0.04-0.15 rad; the skill's own orientation error is about 0.1 rad.
+            let error = t["orientation_error_rad"].as_f64().unwrap();
+            assert!(error < 0.25, "{roll}: {t}");
+        }
+    }
+    let out = kumi(&["sim", "tricycle", "--skill-on", "all", "--leg-roll=4"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr)
+        .contains("--leg-roll must be an angle in [-pi, pi] rad, got 4"));
+}
+
+#[test]
 fn sim_refuses_a_nonsense_duration() {
     let out = kumi(&["sim", "arm", "--seconds=-3"]);
     assert!(!out.status.success());
