@@ -8,6 +8,7 @@ use clap::{Args, ValueEnum};
 use kumi_model::{assemble, load_morphology, ModuleInstance, ModuleLibrary, RobotModel, Role};
 use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::{self, Goal, JOINTS};
+use kumi_policies::rotation::orientation_error;
 use kumi_policies::skill::ArmSkill;
 
 use kumi_runtime::{BackendChoice, SkillPolicy};
@@ -131,7 +132,7 @@ struct Tracking {
     module: String,
     /// Distance from the tool to its goal position [m].
     position_error_m: f64,
-    /// Angle between the tool's orientation and its goal's [rad].
+    /// Angle between the tool's orientation and its goal's [rad], the skill's own measure.
     orientation_error_rad: f64,
     /// The module's joint angles at the end [rad].
     joints_rad: [f64; JOINTS],
@@ -210,7 +211,7 @@ impl SkillDriver {
         Tracking {
             module: self.module.clone(),
             position_error_m: (tool.translation.vector - self.goal.position_b).norm(),
-            orientation_error_rad: tool.rotation.angle_to(&self.goal.orientation_b),
+            orientation_error_rad: orientation_error(&self.goal.orientation_b, &tool.rotation),
             joints_rad: q,
         }
     }
