@@ -8,7 +8,9 @@ Run with ROS_DOMAIN_ID set to the domain of the node under test.
 import argparse
 import json
 import math
+import os
 import sys
+import threading
 import time
 
 import rclpy
@@ -56,6 +58,15 @@ TYPES = {
     "diagnostic_msgs/DiagnosticStatus": DiagnosticStatus,
     "diagnostic_msgs/DiagnosticArray": DiagnosticArray,
 }
+
+
+_T0 = time.monotonic()
+
+
+def note(text):
+    """A progress line on stderr, seconds since start: a peer killed at its deadline shows where
+    it was."""
+    print(f"[peer {time.monotonic() - _T0:7.2f} s] {text}", file=sys.stderr, flush=True)
 
 
 def to_dict(msg):
@@ -454,6 +465,7 @@ def cmd_fakelimb(args, peer):
     # Its first reading once someone listens (a reading published before the node subscribed
     # would be lost, as it is with Motion Stack's volatile joint_read).
     peer.spin_until(lambda: read.get_subscription_count() > 0, args.drive_seconds)
+    note(f"{ns}/joint_read has {read.get_subscription_count()} subscriber(s)")
     peer.spin_until(lambda: False, 0.5)
     next_tick = time.monotonic()
     longest_quiet, last_read = 0.0, time.monotonic()
@@ -870,8 +882,10 @@ def main():
     args = p.parse_args()
     if args.command == "latency":
         args.samples = int(args.samples or 50)
+    note(f"{args.command}: rclpy imported")
     rclpy.init()
     peer = Peer()
+    note("node up")
     try:
         out = {
             "observe": cmd_observe, "drive": cmd_drive, "late": cmd_late, "roundtrip": cmd_roundtrip,
@@ -881,11 +895,28 @@ def main():
             "flood": cmd_flood, "target": cmd_target, "fakelimb": cmd_fakelimb,
             "diagnostics": cmd_diagnostics, "fakeodom": cmd_fakeodom,
         }[args.command](args, peer)
-    finally:
-        peer.destroy_node()
-        rclpy.try_shutdown()
+        note(f"{args.command} done")
+    except BaseException:
+        leave(peer, status=1)
+        raise
+    # The result is out before rclpy shuts down, so that a shutdown that hangs cannot hold it
+    # back (a fake limb once ran past its deadline on CI; the notes above now say where).
     print(json.dumps(out))
     sys.stdout.flush()
+    leave(peer, status=0)
+
+
+def leave(peer, status, within_s=10.0):
+    """Destroys the node and shuts rclpy down; if that hangs past `within_s`, says so and exits
+    with `status` (the command's own: 0 after a result, 1 after an exception)."""
+    watchdog = threading.Timer(within_s, lambda: (note(f"rclpy shutdown hung {within_s} s; leaving"), os._exit(status)))
+    watchdog.daemon = True
+    watchdog.start()
+    peer.destroy_node()
+    note("node destroyed")
+    rclpy.try_shutdown()
+    note("rclpy shut down")
+    watchdog.cancel()
 
 
 if __name__ == "__main__":
