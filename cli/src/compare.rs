@@ -102,6 +102,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
                 backend: args.backend,
                 engine: args.engine.clone(),
                 json: false,
+                episodes: None,
             })
             .with_context(|| format!("evaluating the {variant} policy of {robot}"))?;
             for evaluation in results.evaluations {
@@ -625,6 +626,9 @@ mod tests {
                 leg: f64::NAN,
                 contacts: 3,
                 terminated: false,
+                start_position: 2.0,
+                closest_position: p,
+                steps: 360,
             })
             .collect();
         let stats =

@@ -11,6 +11,7 @@ use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy, WholeBodyPolicy};
 use kumi_train::arm_reach::ArmReachConfig;
 use kumi_train::evaluate::evaluate;
+use kumi_train::evaluate_body::Episode;
 
 use crate::sim::load_model;
 
@@ -57,6 +58,11 @@ pub struct EvalBodyArgs {
     /// Print one JSON object (an array for several engines) instead of markdown.
     #[arg(long)]
     pub json: bool,
+    /// Also write every episode to this CSV: its start, closest and final tool errors, yaw
+    /// error, leg orientation, contact steps, length and whether it fell (a column names the
+    /// engine).
+    #[arg(long)]
+    pub episodes: Option<PathBuf>,
 }
 
 pub fn run(what: EvalCommand) -> Result<()> {
@@ -77,6 +83,11 @@ fn shown(path: &std::path::Path) -> String {
 
 fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
     let results = evaluate_whole_body(&args)?;
+    if let Some(path) = &args.episodes {
+        std::fs::write(path, results.episodes_csv())
+            .with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("episodes written to {}", path.display());
+    }
     if args.json {
         match results.evaluations.as_slice() {
             [one] => println!("{}", serde_json::to_string(one)?),
@@ -98,6 +109,17 @@ pub struct BodyEvaluations {
 }
 
 impl BodyEvaluations {
+    /// Every episode of every engine, one CSV row each.
+    pub fn episodes_csv(&self) -> String {
+        let mut text = format!("engine,{}\n", Episode::CSV_HEADER);
+        for result in &self.evaluations {
+            for (k, e) in result.episodes.iter().enumerate() {
+                text.push_str(&format!("{},{}\n", result.engine, e.csv_row(k)));
+            }
+        }
+        text
+    }
+
     pub fn markdown(&self) -> String {
         let mut text = self.header.clone();
         for result in &self.evaluations {

@@ -162,6 +162,32 @@ pub struct Episode {
     pub contacts: usize,
     /// Ended by a fall or diverged physics.
     pub terminated: bool,
+    /// Tool position error [m] at the start.
+    pub start_position: f64,
+    /// The smallest tool position error [m] over the episode.
+    pub closest_position: f64,
+    /// Control steps it ran.
+    pub steps: usize,
+}
+
+impl Episode {
+    /// The header of [`Episode::csv_row`].
+    pub const CSV_HEADER: &'static str = "episode,start_position_error_m,closest_position_error_m,final_position_error_m,final_yaw_error_rad,leg_orientation_rad,contact_steps,steps,fell";
+
+    /// One CSV row, `k` the episode's index.
+    pub fn csv_row(&self, k: usize) -> String {
+        format!(
+            "{k},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{}",
+            self.start_position,
+            self.closest_position,
+            self.position,
+            self.yaw,
+            self.leg,
+            self.contacts,
+            self.steps,
+            u8::from(self.terminated)
+        )
+    }
 }
 
 /// Evaluates a whole-body policy over `rollouts` episodes. `make_policy` builds one policy
@@ -193,11 +219,14 @@ where
                     .map_err(|e| EvalError::Policy(e.to_string()))?;
                 env.reseed(seed.wrapping_mul(1_000_003).wrapping_add(k as u64));
                 let mut obs = env.reset();
-                let mut contacts = 0;
+                let start_position = env.errors().0;
+                let (mut contacts, mut closest, mut steps) = (0, start_position, 0);
                 loop {
                     let action = policy(&obs).map_err(EvalError::Policy)?;
                     let out = env.step(&action);
                     contacts += usize::from(rule.any(env.world()));
+                    closest = closest.min(out.position_error);
+                    steps += 1;
                     if out.terminated || out.truncated {
                         return Ok(Episode {
                             position: out.position_error,
@@ -205,6 +234,9 @@ where
                             leg: leg_orientation(&model, env.world()),
                             contacts,
                             terminated: out.terminated,
+                            start_position,
+                            closest_position: closest,
+                            steps,
                         });
                     }
                     obs = out.observation;

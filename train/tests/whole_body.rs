@@ -447,3 +447,25 @@ fn a_tiny_whole_body_task_is_learnt() {
         "not learnt: {before:.3} m -> {after:.3} m"
     );
 }
+
+#[test]
+fn the_observed_tool_pose_is_the_worlds_while_the_robot_moves() {
+    // The policy sees the tool through forward kinematics of the joint angles from the base
+    // pose (as the whole-body node computes it); the reward measures the world's tool link.
+    // They must agree for every robot, also while the robot drives and its arms move.
+    for name in ["minimal", "dragon", "tricycle"] {
+        let mut env = WholeBody::new(model(name), config(1.5), &skill(), 3).unwrap();
+        let act = env.terms().size();
+        let mut worst: f64 = 0.0;
+        for step in 0..20 {
+            let action: Vec<f32> = (0..act)
+                .map(|i| ((i * 7 + step * 3) % 11) as f32 / 5.5 - 1.0)
+                .collect();
+            env.step(&action);
+            let (seen, real) = (env.observed_tool_pose_w(), env.tool_pose_w());
+            worst = worst.max((seen.translation.vector - real.translation.vector).norm());
+        }
+        println!("{name}: observed tool at most {worst:.2e} m from the world's");
+        assert!(worst < 1e-3, "{name}: {worst} m");
+    }
+}
