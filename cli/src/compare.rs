@@ -103,6 +103,8 @@ pub fn run(args: CompareArgs) -> Result<()> {
                 engine: args.engine.clone(),
                 json: false,
                 episodes: None,
+                trace: None,
+                traced: 0,
             })
             .with_context(|| format!("evaluating the {variant} policy of {robot}"))?;
             for evaluation in results.evaluations {
@@ -629,6 +631,11 @@ mod tests {
                 start_position: 2.0,
                 closest_position: p,
                 steps: 360,
+                target: kumi_terms::observation::Target {
+                    position_w: nalgebra::Vector3::zeros(),
+                    yaw: 0.0,
+                },
+                trace: Vec::new(),
             })
             .collect();
         let stats =

@@ -11,7 +11,7 @@ use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy, WholeBodyPolicy};
 use kumi_train::arm_reach::ArmReachConfig;
 use kumi_train::evaluate::evaluate;
-use kumi_train::evaluate_body::Episode;
+use kumi_train::evaluate_body::{Episode, Protocol, TraceStep};
 
 use crate::sim::load_model;
 
@@ -63,6 +63,13 @@ pub struct EvalBodyArgs {
     /// engine).
     #[arg(long)]
     pub episodes: Option<PathBuf>,
+    /// Also write every control step of the first `--traced` episodes to this CSV: base pose,
+    /// tool pose, target and errors, in the world frame (a column names the engine).
+    #[arg(long)]
+    pub trace: Option<PathBuf>,
+    /// How many episodes `--trace` records.
+    #[arg(long, default_value_t = 10)]
+    pub traced: usize,
 }
 
 pub fn run(what: EvalCommand) -> Result<()> {
@@ -87,6 +94,11 @@ fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
         std::fs::write(path, results.episodes_csv())
             .with_context(|| format!("writing {}", path.display()))?;
         eprintln!("episodes written to {}", path.display());
+    }
+    if let Some(path) = &args.trace {
+        std::fs::write(path, results.trace_csv())
+            .with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("traces written to {}", path.display());
     }
     if args.json {
         match results.evaluations.as_slice() {
@@ -115,6 +127,20 @@ impl BodyEvaluations {
         for result in &self.evaluations {
             for (k, e) in result.episodes.iter().enumerate() {
                 text.push_str(&format!("{},{}\n", result.engine, e.csv_row(k)));
+            }
+        }
+        text
+    }
+
+    /// Every step of the traced episodes of every engine, one CSV row each.
+    pub fn trace_csv(&self) -> String {
+        let mut text = format!("engine,{}\n", TraceStep::CSV_HEADER);
+        for result in &self.evaluations {
+            for (k, e) in result.episodes.iter().enumerate() {
+                for (step, s) in e.trace.iter().enumerate() {
+                    let row = s.csv_row(k, step, &e.target);
+                    text.push_str(&format!("{},{row}\n", result.engine));
+                }
             }
         }
         text
@@ -178,8 +204,11 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
             model.clone(),
             config,
             &skill,
-            args.rollouts,
-            args.seed,
+            Protocol {
+                rollouts: args.rollouts,
+                seed: args.seed,
+                traced: if args.trace.is_some() { args.traced } else { 0 },
+            },
             || {
                 let mut policy = WholeBodyPolicy::load(&path, &expected, args.backend)
                     .map_err(|e| e.to_string())?;

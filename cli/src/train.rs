@@ -652,6 +652,50 @@ mod tests {
     }
 
     #[test]
+    fn every_variant_of_a_robot_has_one_task_and_its_targets_are_within_the_tools_reach() {
+        // The baselines are compared with the hierarchical policy on the same task; and the
+        // target heights must lie around the manipulator's tool standing at home, where its
+        // goal box (+-manipulator_position_m) can bring it. Tricycle's tool stands 0.9 m higher
+        // than Minimal's; its first configs kept Minimal's heights, and no hierarchical policy
+        // could come within 0.75 m of a target.
+        for robot in ["minimal", "dragon", "tricycle"] {
+            let hierarchical = read_body_config(None, robot, Variant::Hierarchical).unwrap();
+            for (other, variant, _) in SHIPPED_BODY_CONFIGS {
+                if other == robot && variant != Variant::Hierarchical {
+                    let config = read_body_config(None, robot, variant).unwrap();
+                    assert_eq!(config.task, hierarchical.task, "{robot} {variant}");
+                }
+            }
+            let ArmControl::Skill(bounds) = hierarchical.arms().unwrap() else {
+                panic!("{robot}: the hierarchical config drives the skill")
+            };
+            let home_z = standing_tool_height_m(robot);
+            let [lo, hi] = hierarchical.task.target_z_m;
+            let middle = 0.5 * (lo + hi);
+            assert!(
+                (middle - home_z).abs() < bounds.manipulator_position_m,
+                "{robot}: targets at z in [{lo}, {hi}] m, the tool at home at {home_z:.2} m"
+            );
+        }
+    }
+
+    /// The manipulator tool's height [m] with the robot standing at home.
+    fn standing_tool_height_m(robot: &str) -> f64 {
+        let model = load_model(robot).unwrap();
+        let sim = kumi_worlds::SimConfig::for_model(&model);
+        let mut world =
+            kumi_worlds::build(kumi_worlds::Engine::Rapier, model.clone(), sim).unwrap();
+        let state = world.standing_state(0.0, 0.0, 0.0, kumi_worlds::home_joint_positions(&model));
+        world.reset(&state);
+        let manipulator = model
+            .modules_with_role(kumi_model::Role::Manipulator)
+            .next()
+            .unwrap();
+        let tool = manipulator.ee_link.as_ref().unwrap();
+        world.link_pose(tool).unwrap().translation.z
+    }
+
+    #[test]
     fn a_config_with_both_or_neither_arm_control_is_refused() {
         let (_, _, flat) = SHIPPED_BODY_CONFIGS[3];
         let both = format!("{flat}\n[action]\nmanipulator_position_m = 0.25\nmanipulator_rotation_rad = 0.5\nleg_position_m = 0.1\nleg_roll_rad = 0.5\n");

@@ -259,6 +259,7 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         "{csv}"
     );
     let policy = out_dir.join("minimal_whole_body.onnx");
+    let (episodes, trace) = (out_dir.join("episodes.csv"), out_dir.join("trace.csv"));
     let v: serde_json::Value = kumi_json(&[
         "eval",
         "whole-body",
@@ -270,8 +271,33 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         "--backend",
         "tract",
         "--json",
+        "--episodes",
+        episodes.to_str().unwrap(),
+        "--trace",
+        trace.to_str().unwrap(),
+        "--traced",
+        "1",
     ]);
     assert_eq!(v["rollouts"], 2);
+    // One row per episode; one per step of the one traced episode, its errors those the
+    // episode ended with.
+    let episodes = std::fs::read_to_string(episodes).unwrap();
+    let rows: Vec<Vec<&str>> = episodes.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 3, "{episodes}");
+    assert_eq!(
+        rows[0][..3],
+        ["engine", "episode", "start_position_error_m"]
+    );
+    let steps: usize = rows[1][8].parse().unwrap();
+    let trace = std::fs::read_to_string(trace).unwrap();
+    let lines: Vec<&str> = trace.lines().collect();
+    assert_eq!(lines.len(), 1 + steps, "{episodes}");
+    assert!(lines[1..].iter().all(|l| l.split(',').nth(1) == Some("0")));
+    let start: f64 = lines[1].split(',').nth(14).unwrap().parse().unwrap();
+    assert!(
+        (start - rows[1][2].parse::<f64>().unwrap()).abs() < 1e-3,
+        "{trace}"
+    );
     assert_eq!(v["robot"], "minimal");
     for key in ["position_error_m", "yaw_error_rad", "contacts_per_episode"] {
         assert!(

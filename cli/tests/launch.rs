@@ -32,6 +32,9 @@ const START: Duration = Duration::from_secs(60);
 /// Minimal's target: 1.4 m from the start, in the trained range (|x|, |y| <= 3 m, z in
 /// [0.9, 1.5] m), heading 0.5 rad.
 const TARGET: [f64; 4] = [1.0, 0.5, 1.1, 0.5];
+/// Tricycle's: the same, at a height in its trained range (z in [2.05, 2.45] m: its tool stands
+/// on top of a 1.24 m hub).
+const TRICYCLE_TARGET: [f64; 4] = [1.0, 0.5, 2.2, 0.5];
 /// Simulated seconds the peer watches (the episodes of training last 12 s).
 const DRIVE_S: f64 = 8.0;
 
@@ -53,7 +56,12 @@ fn send_target(domain: u16, robot: &str, extra: &[&str]) -> serde_json::Value {
 
 /// [`send_target`], watching `drive_s` simulated seconds.
 fn send_target_for(domain: u16, robot: &str, drive_s: f64, extra: &[&str]) -> serde_json::Value {
-    let goal = TARGET.map(|v| v.to_string()).join(",");
+    let target = if robot == "tricycle" {
+        TRICYCLE_TARGET
+    } else {
+        TARGET
+    };
+    let goal = target.map(|v| v.to_string()).join(",");
     let drive = drive_s.to_string();
     let mut args = vec![
         "target",

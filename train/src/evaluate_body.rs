@@ -7,6 +7,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use kumi_model::{RobotModel, Role};
+use kumi_terms::observation::{tool_yaw, Target};
 use kumi_worlds::{SimWorld, GROUND};
 use nalgebra::Vector3;
 use rayon::prelude::*;
@@ -149,8 +150,50 @@ pub fn leg_orientation(model: &RobotModel, world: &dyn SimWorld) -> f64 {
     }
 }
 
-/// One episode's outcome.
+/// One control step of a traced episode (world frame).
 #[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceStep {
+    /// Base position [m] and heading [rad] (of its x axis).
+    pub base: [f64; 3],
+    /// Tool position [m] and heading [rad].
+    pub tool: [f64; 4],
+    /// Tool position error [m] and absolute yaw error [rad].
+    pub errors: [f64; 2],
+}
+
+impl TraceStep {
+    /// The header of [`TraceStep::csv_row`].
+    pub const CSV_HEADER: &'static str = "episode,step,base_x_m,base_y_m,base_yaw_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,target_x_m,target_y_m,target_z_m,target_yaw_rad,position_error_m,yaw_error_rad";
+
+    fn of(env: &WholeBody) -> Self {
+        let (base, tool) = (env.world().base_pose(), env.tool_pose_w());
+        let (b, t) = (base.translation.vector, tool.translation.vector);
+        let (position, yaw) = env.errors();
+        Self {
+            base: [b.x, b.y, tool_yaw(&base.rotation)],
+            tool: [t.x, t.y, t.z, tool_yaw(&tool.rotation)],
+            errors: [position, yaw],
+        }
+    }
+
+    /// One CSV row: episode `k`, step `step`, to `target`.
+    pub fn csv_row(&self, k: usize, step: usize, target: &Target) -> String {
+        let p = target.position_w;
+        let values = self
+            .base
+            .iter()
+            .chain(&self.tool)
+            .chain(&[p.x, p.y, p.z, target.yaw])
+            .chain(&self.errors)
+            .map(|v| format!("{v:.4}"))
+            .collect::<Vec<_>>()
+            .join(",");
+        format!("{k},{step},{values}")
+    }
+}
+
+/// One episode's outcome.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Episode {
     /// Final tool position error [m].
     pub position: f64,
@@ -168,6 +211,10 @@ pub struct Episode {
     pub closest_position: f64,
     /// Control steps it ran.
     pub steps: usize,
+    /// Its target.
+    pub target: Target,
+    /// Every step, from the start (empty unless the episode was traced).
+    pub trace: Vec<TraceStep>,
 }
 
 impl Episode {
@@ -190,20 +237,34 @@ impl Episode {
     }
 }
 
-/// Evaluates a whole-body policy over `rollouts` episodes. `make_policy` builds one policy
+/// Which episodes to run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Protocol {
+    pub rollouts: usize,
+    /// Episode `k` is seeded by `(seed, k)`.
+    pub seed: u64,
+    /// The first `traced` episodes keep every step ([`Episode::trace`]).
+    pub traced: usize,
+}
+
+/// Evaluates a whole-body policy over the protocol's episodes. `make_policy` builds one policy
 /// per worker thread; a policy maps an observation to an action (or fails with a message).
 pub fn evaluate_body<P, F>(
     model: Arc<RobotModel>,
     config: WholeBodyConfig,
     skill_onnx: &[u8],
-    rollouts: usize,
-    seed: u64,
+    protocol: Protocol,
     make_policy: F,
 ) -> Result<BodyEvaluation, EvalError>
 where
     F: Fn() -> Result<P, String> + Sync,
     P: FnMut(&[f32]) -> Result<Vec<f32>, String>,
 {
+    let Protocol {
+        rollouts,
+        seed,
+        traced,
+    } = protocol;
     let rule = ContactRule::new(&model);
     let episodes: Vec<Episode> = (0..rollouts)
         .into_par_iter()
@@ -221,7 +282,11 @@ where
                 let mut obs = env.reset();
                 let start_position = env.errors().0;
                 let (mut contacts, mut closest, mut steps) = (0, start_position, 0);
+                let mut trace = Vec::new();
                 loop {
+                    if k < traced {
+                        trace.push(TraceStep::of(env));
+                    }
                     let action = policy(&obs).map_err(EvalError::Policy)?;
                     let out = env.step(&action);
                     contacts += usize::from(rule.any(env.world()));
@@ -237,6 +302,8 @@ where
                             start_position,
                             closest_position: closest,
                             steps,
+                            target: env.target(),
+                            trace,
                         });
                     }
                     obs = out.observation;
