@@ -91,14 +91,10 @@ fn shown(path: &std::path::Path) -> String {
 fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
     let results = evaluate_whole_body(&args)?;
     if let Some(path) = &args.episodes {
-        std::fs::write(path, results.episodes_csv())
-            .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("episodes written to {}", path.display());
+        write_csv(path, &results.episodes_csv(), "episodes")?;
     }
     if let Some(path) = &args.trace {
-        std::fs::write(path, results.trace_csv())
-            .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("traces written to {}", path.display());
+        write_csv(path, &results.trace_csv(), "traces")?;
     }
     if args.json {
         match results.evaluations.as_slice() {
@@ -108,6 +104,13 @@ fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
     } else {
         print!("{}", results.markdown());
     }
+    Ok(())
+}
+
+/// Writes `text` to `path` and says so.
+fn write_csv(path: &std::path::Path, text: &str, what: &str) -> Result<()> {
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    eprintln!("{what} written to {}", path.display());
     Ok(())
 }
 

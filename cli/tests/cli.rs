@@ -279,8 +279,8 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         "1",
     ]);
     assert_eq!(v["rollouts"], 2);
-    // One row per episode; one per step of the one traced episode, its errors those the
-    // episode ended with.
+    // One row per episode; for the one traced episode a row at the start and one after each
+    // step, its first and last errors those the episode started and ended with.
     let episodes = std::fs::read_to_string(episodes).unwrap();
     let rows: Vec<Vec<&str>> = episodes.lines().map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 3, "{episodes}");
@@ -291,11 +291,16 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
     let steps: usize = rows[1][8].parse().unwrap();
     let trace = std::fs::read_to_string(trace).unwrap();
     let lines: Vec<&str> = trace.lines().collect();
-    assert_eq!(lines.len(), 1 + steps, "{episodes}");
+    assert_eq!(lines.len(), 1 + (steps + 1), "{episodes}");
     assert!(lines[1..].iter().all(|l| l.split(',').nth(1) == Some("0")));
-    let start: f64 = lines[1].split(',').nth(14).unwrap().parse().unwrap();
+    let error_at = |line: &str| -> f64 { line.split(',').nth(14).unwrap().parse().unwrap() };
+    let (start, end) = (error_at(lines[1]), error_at(lines[lines.len() - 1]));
     assert!(
         (start - rows[1][2].parse::<f64>().unwrap()).abs() < 1e-3,
+        "{trace}"
+    );
+    assert!(
+        (end - rows[1][4].parse::<f64>().unwrap()).abs() < 1e-3,
         "{trace}"
     );
     assert_eq!(v["robot"], "minimal");

@@ -213,7 +213,7 @@ pub struct Episode {
     pub steps: usize,
     /// Its target.
     pub target: Target,
-    /// Every step, from the start (empty unless the episode was traced).
+    /// The start and the state after every step (empty unless the episode was traced).
     pub trace: Vec<TraceStep>,
 }
 
@@ -283,12 +283,15 @@ where
                 let start_position = env.errors().0;
                 let (mut contacts, mut closest, mut steps) = (0, start_position, 0);
                 let mut trace = Vec::new();
+                if k < traced {
+                    trace.push(TraceStep::of(env));
+                }
                 loop {
+                    let action = policy(&obs).map_err(EvalError::Policy)?;
+                    let out = env.step(&action);
                     if k < traced {
                         trace.push(TraceStep::of(env));
                     }
-                    let action = policy(&obs).map_err(EvalError::Policy)?;
-                    let out = env.step(&action);
                     contacts += usize::from(rule.any(env.world()));
                     closest = closest.min(out.position_error);
                     steps += 1;
