@@ -390,9 +390,9 @@ fn a_launched_dragon_reaches_a_target_from_rclpy_on_mujoco() {
 }
 
 /// The 90th percentile of Tricycle's final position error [m] over 1000 MuJoCo rollouts
-/// (0.743 m, policies/tricycle_whole_body.md; the median is 0.137 m). This target: 0.043-0.074 m
-/// measured here.
-const TRICYCLE_P90: f64 = 0.75;
+/// (0.552 m, policies/tricycle_whole_body.md; the median is 0.225 m), rounded up. This target:
+/// 0.40-0.50 m measured here in four runs (the robot comes closer, then wanders near it).
+const TRICYCLE_P90: f64 = 0.6;
 
 #[test]
 fn a_launched_tricycle_reaches_a_target_from_rclpy_on_mujoco() {
