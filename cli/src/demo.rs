@@ -17,6 +17,7 @@ use kumi_msgs::nav_msgs::Odometry;
 use kumi_msgs::std_msgs::Header;
 use kumi_ros::{geometry, qos, topics, RosNode};
 use kumi_terms::observation::{target_errors, tool_yaw, Target};
+use kumi_terms::termination::tilt;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -52,7 +53,7 @@ pub struct DemoArgs {
     #[arg(long)]
     pub engine: Option<String>,
     /// One JSON object on stdout: {robot, targets: [{target: [x, y, z, yaw], position_error_m,
-    /// yaw_error_rad, seconds}], plot, csv}.
+    /// yaw_error_rad, seconds, tipped_over_after_s}], skipped, plot, csv}.
     #[arg(long)]
     pub json: bool,
 }
@@ -82,8 +83,18 @@ fn draw_targets(n: usize, seed: u64, range: &TargetRange) -> Vec<Target> {
 struct Sample {
     t_s: f64,
     target: usize,
+    /// Base x, y [m] and yaw [rad].
     base: [f64; 3],
+    /// Base tilt [rad] (`kumi_terms::termination::tilt`).
+    tilt_rad: f64,
     tool: Isometry3<f64>,
+}
+
+/// A robot that tipped over: during which target, and how long after it was sent [s].
+struct TippedOver {
+    target: usize,
+    after_s: f64,
+    tilt_rad: f64,
 }
 
 /// What one target came to.
@@ -94,12 +105,16 @@ struct Outcome {
     yaw_error_rad: f64,
     /// Simulated seconds until the tool first came within 0.1 m of the target (`null`: never).
     seconds: Option<f64>,
+    /// Simulated seconds until the base tilted past the policy's limit (`null`: it did not).
+    tipped_over_after_s: Option<f64>,
 }
 
 #[derive(serde::Serialize)]
 struct Report {
     robot: String,
     targets: Vec<Outcome>,
+    /// Targets not sent because the robot had tipped over.
+    skipped: usize,
     plot: String,
     csv: String,
 }
@@ -138,16 +153,22 @@ pub fn run(args: DemoArgs) -> Result<()> {
         profile: None,
     };
     launch::check_policy(&model, &launch_args)?;
-    let range =
+    let (range, tilt_limit_rad) =
         match crate::train::read_body_config(None, &robot, crate::train::Variant::Hierarchical) {
-            Ok(c) => TargetRange {
-                xy_m: c.task.target_xy_m,
-                z_m: c.task.target_z_m,
-            },
-            Err(_) => TargetRange {
-                xy_m: 3.0,
-                z_m: [0.9, 1.5],
-            },
+            Ok(c) => (
+                TargetRange {
+                    xy_m: c.task.target_xy_m,
+                    z_m: c.task.target_z_m,
+                },
+                Some(c.task.tilt_limit_rad),
+            ),
+            Err(_) => (
+                TargetRange {
+                    xy_m: 3.0,
+                    z_m: [0.9, 1.5],
+                },
+                None,
+            ),
         };
     let targets = draw_targets(args.targets, args.seed, &range);
     let out = args
@@ -174,24 +195,28 @@ pub fn run(args: DemoArgs) -> Result<()> {
         domain,
         &targets,
         &args,
+        tilt_limit_rad,
         &shutdown,
         &mut launched,
     );
     launched.stop(Duration::from_secs(5));
-    let samples = result?;
-    report(&robot, &targets, &samples, &out, args.json)
+    let (samples, tipped) = result?;
+    report(&robot, &targets, &samples, tipped.as_ref(), &out, args.json)
 }
 
-/// Sends the targets one by one and records the run.
+/// Sends the targets one by one and records the run. A robot that tilts past `tilt_limit_rad`
+/// has tipped over (the whole-body node stops driving it): the remaining targets are not sent.
+#[allow(clippy::too_many_arguments)]
 fn drive(
     model: &kumi_model::RobotModel,
     robot: &str,
     domain: u16,
     targets: &[Target],
     args: &DemoArgs,
+    tilt_limit_rad: Option<f64>,
     shutdown: &AtomicBool,
     launched: &mut Launch,
-) -> Result<Vec<Sample>> {
+) -> Result<(Vec<Sample>, Option<TippedOver>)> {
     let mut node = RosNode::new(&format!("/{robot}"), "demo", domain)?;
     let publisher =
         node.publisher::<PoseStamped>(&topics::robot_goal_pose(robot), qos::default())?;
@@ -217,7 +242,9 @@ fn drive(
     let frame = topics::odom_frame(robot);
     let mut samples = Vec::new();
     let mut base = [0.0; 3];
+    let mut tilt_rad = 0.0;
     let mut t_end = 0.0_f64;
+    let mut tipped = None;
     for (i, target) in targets.iter().enumerate() {
         let t_start = t_end;
         let mut sent_at = None::<Instant>;
@@ -238,10 +265,9 @@ fn drive(
             while let Some(msg) = odom.take() {
                 if let Ok((m, _)) = msg {
                     let p = m.pose.pose.position;
-                    let q = geometry::isometry(&m.pose.pose)
-                        .map(|iso| tool_yaw(&iso.rotation))
-                        .unwrap_or(0.0);
-                    base = [p.x, p.y, q];
+                    let rotation = geometry::isometry(&m.pose.pose).map(|iso| iso.rotation);
+                    base = [p.x, p.y, rotation.map_or(0.0, |r| tool_yaw(&r))];
+                    tilt_rad = rotation.map_or(0.0, |r| tilt(&r));
                 }
             }
             let mut done = false;
@@ -260,9 +286,18 @@ fn drive(
                     t_s: t,
                     target: i,
                     base,
+                    tilt_rad,
                     tool: pose,
                 });
                 done |= t >= t_start + args.seconds;
+                if tipped.is_none() && tilt_limit_rad.is_some_and(|limit| tilt_rad > limit) {
+                    tipped = Some(TippedOver {
+                        target: i,
+                        after_s: t - t_start,
+                        tilt_rad,
+                    });
+                    done = true;
+                }
             }
             if done {
                 break;
@@ -278,10 +313,21 @@ fn drive(
             target.position_w.y,
             target.position_w.z,
             target.yaw,
-            args.seconds
+            last.t_s - t_start
         );
+        if let Some(t) = &tipped {
+            eprintln!(
+                "target {}: the robot tipped over after {:.1} s (tilt {:.3} rad, past the policy's {:.3}); the whole-body node stopped driving it, and {} more target(s) are not sent",
+                i + 1,
+                t.after_s,
+                t.tilt_rad,
+                tilt_limit_rad.unwrap_or(f64::NAN),
+                targets.len() - i - 1
+            );
+            break;
+        }
     }
-    Ok(samples)
+    Ok((samples, tipped))
 }
 
 /// Writes the CSV and the plot; prints the table (or the JSON object).
@@ -289,15 +335,17 @@ fn report(
     robot: &str,
     targets: &[Target],
     samples: &[Sample],
+    tipped: Option<&TippedOver>,
     out: &std::path::Path,
     json: bool,
 ) -> Result<()> {
     let csv_path = out.join("run.csv");
     let mut csv = String::from(
-        "t_s,target,target_x_m,target_y_m,target_z_m,target_yaw_rad,base_x_m,base_y_m,base_yaw_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,position_error_m,yaw_error_rad\n",
+        "t_s,target,target_x_m,target_y_m,target_z_m,target_yaw_rad,base_x_m,base_y_m,base_yaw_rad,base_tilt_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,position_error_m,yaw_error_rad\n",
     );
     let mut outcomes = Vec::new();
-    for (i, target) in targets.iter().enumerate() {
+    let sent = tipped.map_or(targets.len(), |t| t.target + 1);
+    for (i, target) in targets.iter().enumerate().take(sent) {
         let mine: Vec<&Sample> = samples.iter().filter(|s| s.target == i).collect();
         let start = mine.first().map_or(0.0, |s| s.t_s);
         let mut reached = None;
@@ -308,7 +356,7 @@ fn report(
             }
             let t = s.tool.translation.vector;
             csv.push_str(&format!(
-                "{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}\n",
+                "{:.4},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}\n",
                 s.t_s,
                 i + 1,
                 target.position_w.x,
@@ -318,6 +366,7 @@ fn report(
                 s.base[0],
                 s.base[1],
                 s.base[2],
+                s.tilt_rad,
                 t.x,
                 t.y,
                 t.z,
@@ -339,6 +388,7 @@ fn report(
             position_error_m: p,
             yaw_error_rad: y,
             seconds: reached,
+            tipped_over_after_s: tipped.filter(|t| t.target == i).map(|t| t.after_s),
         });
     }
     std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
@@ -374,17 +424,18 @@ fn report(
     let report = Report {
         robot: robot.to_string(),
         targets: outcomes,
+        skipped: targets.len() - sent,
         plot: svg_path.display().to_string(),
         csv: csv_path.display().to_string(),
     };
     if json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
-        println!("| target | x, y, z [m] | yaw [rad] | final position error [m] | final yaw error [rad] | within 0.1 m after [s] |");
-        println!("|---|---|---|---|---|---|");
+        println!("| target | x, y, z [m] | yaw [rad] | final position error [m] | final yaw error [rad] | within 0.1 m after [s] | tipped over after [s] |");
+        println!("|---|---|---|---|---|---|---|");
         for (i, o) in report.targets.iter().enumerate() {
             println!(
-                "| {} | {:.2}, {:.2}, {:.2} | {:.2} | {:.3} | {:.2} | {} |",
+                "| {} | {:.2}, {:.2}, {:.2} | {:.2} | {:.3} | {:.2} | {} | {} |",
                 i + 1,
                 o.target[0],
                 o.target[1],
@@ -392,7 +443,15 @@ fn report(
                 o.target[3],
                 o.position_error_m,
                 o.yaw_error_rad,
-                o.seconds.map_or("never".into(), |s| format!("{s:.1}"))
+                o.seconds.map_or("never".into(), |s| format!("{s:.1}")),
+                o.tipped_over_after_s
+                    .map_or("-".into(), |s| format!("{s:.1}"))
+            );
+        }
+        if report.skipped > 0 {
+            println!(
+                "{} target(s) not sent: the robot had tipped over",
+                report.skipped
             );
         }
         println!("plot: {}\ncsv: {}", report.plot, report.csv);

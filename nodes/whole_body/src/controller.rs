@@ -8,6 +8,11 @@
 //! the arms keep the goals they were last sent (none before the first target: the arm nodes
 //! hold their joints). The previous action starts over from zeros after a hold, as after a
 //! reset in training.
+//!
+//! **Tipping over.** When the base tilts past the limit the policy was trained with (its
+//! episodes ended there: [`kumi_terms::termination`]), the policy has never seen the state
+//! and its commands mean nothing. The controller holds from then on, upright again or not,
+//! until a new target arrives: an operator decides when to go on.
 
 use kumi_model::RobotModel;
 use kumi_policies::observation::Goal;
@@ -35,6 +40,9 @@ pub enum Hold {
     /// The policy failed (its message).
     #[error("policy failed: {0}")]
     PolicyFailed(String),
+    /// The base tilted past the limit; held until a new target.
+    #[error("tipped over: the base tilted {tilt_rad:.3} rad, past the policy's {limit_rad:.3} rad; send a new target to go on")]
+    TippedOver { tilt_rad: f64, limit_rad: f64 },
 }
 
 /// What one step decided.
@@ -67,6 +75,10 @@ pub struct WholeBodyController {
     target: Option<Target>,
     previous_action: Vec<f32>,
     last_goals: Option<Vec<(String, Goal)>>,
+    /// Tilt [rad] past which the controller stops (none: it never does).
+    tilt_limit_rad: Option<f64>,
+    /// The tilt [rad] the base tipped over at, while holding for it.
+    tipped_rad: Option<f64>,
 }
 
 impl WholeBodyController {
@@ -97,7 +109,20 @@ impl WholeBodyController {
             policy,
             target: None,
             last_goals: None,
+            tilt_limit_rad: None,
+            tipped_rad: None,
         })
+    }
+
+    /// Stops driving when the base tilts past `limit_rad` (the tilt that ended the policy's
+    /// training episodes), until a new target.
+    pub fn with_tilt_limit(mut self, limit_rad: f64) -> Self {
+        self.tilt_limit_rad = Some(limit_rad);
+        self
+    }
+
+    pub fn tilt_limit_rad(&self) -> Option<f64> {
+        self.tilt_limit_rad
     }
 
     /// The modules whose joint states a tick needs, in [`Snapshot::modules`] order.
@@ -118,8 +143,10 @@ impl WholeBodyController {
         self.target
     }
 
+    /// A new target; it also ends a hold for having tipped over.
     pub fn set_target(&mut self, target: Target) {
         self.target = Some(target);
+        self.tipped_rad = None;
     }
 
     /// The manipulator's tool pose in the odometry frame for a tick's state.
@@ -138,6 +165,19 @@ impl WholeBodyController {
         let Some(target) = self.target else {
             return self.hold(Hold::NoTarget, Some(tool_pose_w));
         };
+        if let Some(limit_rad) = self.tilt_limit_rad {
+            let tilt_rad = kumi_terms::termination::tilt(&state.base.pose_w.rotation);
+            if tilt_rad > limit_rad {
+                self.tipped_rad = Some(self.tipped_rad.unwrap_or(tilt_rad));
+            }
+            if let Some(tilt_rad) = self.tipped_rad {
+                let why = Hold::TippedOver {
+                    tilt_rad,
+                    limit_rad,
+                };
+                return self.hold(why, Some(tool_pose_w));
+            }
+        }
         let wheels: Vec<f64> = self
             .wheel_joints
             .iter()
@@ -211,5 +251,95 @@ impl WholeBodyController {
             observation: None,
             action: None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tick::{BaseState, ModuleState};
+    use kumi_model::{assemble, load_morphology, ModuleLibrary};
+    use kumi_msgs::builtin_interfaces::Time;
+    use kumi_terms::GoalBounds;
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+    /// Tricycle's controller over a policy that always answers zeros.
+    fn tricycle() -> WholeBodyController {
+        let library = ModuleLibrary::shipped();
+        let model = assemble(&load_morphology("tricycle", &library).unwrap(), &library);
+        let bounds = GoalBounds {
+            manipulator_position_m: 0.25,
+            manipulator_rotation_rad: 0.5,
+            leg_position_m: 0.05,
+            leg_roll_rad: 1.5,
+        };
+        let terms = ActionTerms::new(&model, &bounds).unwrap();
+        let size = terms.size();
+        let policy: PolicyFn = Box::new(move |_| Ok(vec![0.0; size]));
+        WholeBodyController::new(&model, terms, policy).unwrap()
+    }
+
+    /// Every module at zero joint angles, the base tilted `tilt_rad` about its x axis.
+    fn state(controller: &WholeBodyController, tilt_rad: f64) -> Snapshot {
+        let modules = (0..controller.modules().len())
+            .map(|m| {
+                let n = controller.joint_names(m).len();
+                ModuleState {
+                    q: vec![0.0; n],
+                    qd: vec![0.0; n],
+                }
+            })
+            .collect();
+        Snapshot {
+            stamp: Time::default(),
+            base: BaseState {
+                pose_w: Isometry3::from_parts(
+                    Translation3::new(0.0, 0.0, 1.2),
+                    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), tilt_rad),
+                ),
+                linear_velocity_w: Vector3::zeros(),
+            },
+            modules,
+            synchronous: true,
+        }
+    }
+
+    fn target(x: f64) -> Target {
+        Target {
+            position_w: Vector3::new(x, 0.0, 2.2),
+            yaw: 0.0,
+        }
+    }
+
+    #[test]
+    fn tipped_over_it_holds_until_a_new_target_even_upright_again() {
+        let mut c = tricycle().with_tilt_limit(0.785);
+        c.set_target(target(1.0));
+        assert!(c.step(&state(&c, 0.7)).action.is_some(), "within the limit");
+        let tipped = c.step(&state(&c, 0.9));
+        match tipped.hold {
+            Some(Hold::TippedOver {
+                tilt_rad,
+                limit_rad,
+            }) => assert!((tilt_rad - 0.9).abs() < 1e-9 && limit_rad == 0.785),
+            ref other => panic!("{other:?}"),
+        }
+        assert!(tipped.action.is_none());
+        // Wheels stop; the arms keep the goals they were last sent.
+        assert!(tipped.wheel_velocities.iter().all(|(_, v)| *v == 0.0));
+        assert_eq!(tipped.wheel_velocities.len(), 3);
+        assert!(tipped.goals.is_some());
+        // Upright again: still holding, at the tilt it tipped over at.
+        assert_eq!(c.step(&state(&c, 0.0)).hold, tipped.hold);
+        c.set_target(target(2.0));
+        assert!(
+            c.step(&state(&c, 0.0)).action.is_some(),
+            "a new target re-arms it"
+        );
+        // Without a limit nothing stops it.
+        let mut free = tricycle();
+        free.set_target(target(1.0));
+        assert!(free.step(&state(&free, 1.5)).action.is_some());
+        assert_eq!(free.tilt_limit_rad(), None);
     }
 }

@@ -17,6 +17,8 @@ pub struct Report {
     /// Times the node started holding because an input went stale.
     pub stale_holds: u64,
     pub policy_failures: u64,
+    /// Times the base tipped over (past the policy's tilt limit) and the node stopped driving.
+    pub tipped_over: u64,
     /// Times sim time went back (a restarted simulator) and the node started over.
     pub sim_restarts: u64,
     /// Decisions made on a complete tick (every input with the same stamp).
@@ -41,15 +43,28 @@ impl Report {
         self.latency.2 = self.latency.2.max(seconds);
     }
 
-    /// Records one decision's hold; counts a stale hold when it begins.
-    pub fn step(&mut self, hold: Option<&Hold>) {
+    /// Records one decision's hold; counts a stale hold and a tip-over when they begin.
+    /// Returns whether this hold is one of those, beginning.
+    pub fn step(&mut self, hold: Option<&Hold>) -> bool {
         let was_stale = matches!(self.hold, Some(Hold::Stale { .. }));
-        match hold {
-            Some(Hold::Stale { .. }) if !was_stale => self.stale_holds += 1,
-            Some(Hold::PolicyFailed(_)) => self.policy_failures += 1,
-            _ => {}
-        }
+        let was_tipped = matches!(self.hold, Some(Hold::TippedOver { .. }));
+        let began = match hold {
+            Some(Hold::Stale { .. }) if !was_stale => {
+                self.stale_holds += 1;
+                true
+            }
+            Some(Hold::TippedOver { .. }) if !was_tipped => {
+                self.tipped_over += 1;
+                true
+            }
+            Some(Hold::PolicyFailed(_)) => {
+                self.policy_failures += 1;
+                false
+            }
+            _ => false,
+        };
         self.hold = hold.cloned();
+        began
     }
 
     /// The node's `DiagnosticStatus`, named `kumi whole-body node: <robot>`. WARN while it
@@ -72,6 +87,7 @@ impl Report {
                 DiagnosticStatus::ERROR,
                 format!("holding: policy failed: {e}"),
             ),
+            Some(h @ Hold::TippedOver { .. }) => (DiagnosticStatus::ERROR, format!("holding: {h}")),
         };
         let mut values: Vec<(&str, String)> = [
             ("targets_accepted", self.targets_accepted),
@@ -81,6 +97,7 @@ impl Report {
             ("rejected_malformed", self.malformed),
             ("stale_holds", self.stale_holds),
             ("policy_failures", self.policy_failures),
+            ("tipped_over", self.tipped_over),
             ("sim_restarts", self.sim_restarts),
             ("synchronous_ticks", self.synchronous_ticks),
             ("unsynchronised_ticks", self.unsynchronised_ticks),
@@ -132,8 +149,8 @@ mod tests {
             input: "odometry messages".into(),
             age_s: 0.7,
         };
-        r.step(Some(&stale));
-        r.step(Some(&stale));
+        assert!(r.step(Some(&stale)));
+        assert!(!r.step(Some(&stale)));
         let s = r.status("t");
         assert_eq!(s.level, DiagnosticStatus::WARN);
         assert_eq!(s.message, "holding: odometry messages are 0.70 s old");
@@ -149,6 +166,23 @@ mod tests {
             .values
             .iter()
             .any(|kv| kv.key == "decision_latency_max_ms" && kv.value == "4.00"));
+        let tipped = Hold::TippedOver {
+            tilt_rad: 0.9,
+            limit_rad: 0.785,
+        };
+        assert!(r.step(Some(&tipped)));
+        assert!(!r.step(Some(&tipped)));
+        let s = r.status("t");
+        assert_eq!(s.level, DiagnosticStatus::ERROR);
+        assert_eq!(
+            s.message,
+            "holding: tipped over: the base tilted 0.900 rad, past the policy's 0.785 rad; send a new target to go on"
+        );
+        assert_eq!(r.tipped_over, 1);
+        assert!(s
+            .values
+            .iter()
+            .any(|kv| kv.key == "tipped_over" && kv.value == "1"));
         r.errors = Some((0.1, 0.2));
         r.step(None);
         let s = r.status("t");

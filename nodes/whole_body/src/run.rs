@@ -51,6 +51,9 @@ pub struct WholeBodyNodeConfig {
     pub max_target_distance_m: f64,
     /// How long to listen for another whole-body node of the same robot before starting.
     pub duplicate_check: Duration,
+    /// Base tilt [rad] past which the node stops driving until a new target: the tilt that
+    /// ended the policy's training episodes (none: it never stops).
+    pub tilt_limit_rad: Option<f64>,
     /// MoonBot hardware (Motion Stack): each module's joint states from its limb's lazy
     /// `joint_read`, the base odometry from the profile's topic, wheel velocities as
     /// `sensor_msgs/JointState` velocities on each wheel limb's `joint_set`.
@@ -120,12 +123,16 @@ pub fn prepare(config: &WholeBodyNodeConfig) -> Result<WholeBodyController, Whol
         policy.backend(),
         config.skill.display()
     );
-    WholeBodyController::new(
+    let controller = WholeBodyController::new(
         &config.model,
         terms,
         Box::new(move |obs| policy.act(obs).map_err(|e| e.to_string())),
     )
-    .map_err(robot_error)
+    .map_err(robot_error)?;
+    Ok(match config.tilt_limit_rad {
+        Some(limit_rad) => controller.with_tilt_limit(limit_rad),
+        None => controller,
+    })
 }
 
 /// Where a wheel module's velocity goes.
@@ -362,6 +369,14 @@ pub fn run(
         node.domain_id(),
         topics::robot_goal_pose(robot)
     );
+    match controller.tilt_limit_rad() {
+        Some(limit) => {
+            info!("stops driving if the base tilts past {limit:.3} rad, until a new target")
+        }
+        None => warn!(
+            "no tilt limit: the node drives on even if the robot tips over (--tilt-limit-rad)"
+        ),
+    }
 
     let start = Instant::now();
     let period_s = 1.0 / kumi_model::commands::CONTROL_HZ;
@@ -527,7 +542,10 @@ pub fn run(
             }
         };
         if let Some((decision, stamp)) = decision {
-            report.step(decision.hold.as_ref());
+            let began = report.step(decision.hold.as_ref());
+            if let (true, Some(h @ Hold::TippedOver { .. })) = (began, &decision.hold) {
+                warn!("stopped: {h}");
+            }
             if decision.action.is_some() && report.target_since_s.is_none() {
                 report.target_since_s = Some(stamp.seconds());
             }
