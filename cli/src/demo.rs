@@ -242,9 +242,12 @@ fn drive(
     let frame = topics::odom_frame(robot);
     let mut samples = Vec::new();
     let mut base = [0.0; 3];
-    let mut tilt_rad = 0.0;
+    // The base's latest tilt [rad], and the largest since the last sample: a brief tip the
+    // node caught counts.
+    let (mut tilt_now, mut tilt_rad) = (0.0_f64, 0.0_f64);
     let mut t_end = 0.0_f64;
     let mut tipped = None;
+    let mut last_sample_at = Instant::now();
     for (i, target) in targets.iter().enumerate() {
         let t_start = t_end;
         let mut sent_at = None::<Instant>;
@@ -267,7 +270,8 @@ fn drive(
                     let p = m.pose.pose.position;
                     let rotation = geometry::isometry(&m.pose.pose).map(|iso| iso.rotation);
                     base = [p.x, p.y, rotation.map_or(0.0, |r| tool_yaw(&r))];
-                    tilt_rad = rotation.map_or(0.0, |r| tilt(&r));
+                    tilt_now = rotation.map_or(0.0, |r| tilt(&r));
+                    tilt_rad = tilt_rad.max(tilt_now);
                 }
             }
             let mut done = false;
@@ -289,6 +293,7 @@ fn drive(
                     tilt_rad,
                     tool: pose,
                 });
+                last_sample_at = Instant::now();
                 done |= t >= t_start + args.seconds;
                 if tipped.is_none() && tilt_limit_rad.is_some_and(|limit| tilt_rad > limit) {
                     tipped = Some(TippedOver {
@@ -298,6 +303,10 @@ fn drive(
                     });
                     done = true;
                 }
+                tilt_rad = tilt_now;
+            }
+            if last_sample_at.elapsed() > Duration::from_secs(60) {
+                bail!("no tool pose from the whole-body node for 60 s (target {}); see the nodes' log", i + 1);
             }
             if done {
                 break;

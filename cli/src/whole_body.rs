@@ -61,6 +61,13 @@ pub fn run(args: WholeBodyArgs) -> Result<()> {
     }
     let model = load_model(args.morphology.as_deref().unwrap_or(&args.robot))?;
     let tilt_limit_rad = tilt_limit(args.tilt_limit_rad, &model.name)?;
+    if let (None, Some(limit)) = (args.tilt_limit_rad, tilt_limit_rad) {
+        tracing::info!(
+            "tilt limit {limit} rad: the shipped `{}` policy's training limit (train/configs/whole_body/{}.toml); --tilt-limit-rad for another",
+            model.name,
+            model.name
+        );
+    }
     let hardware = match &args.hardware {
         Some(path) => Some(Arc::new(crate::launch::load_profile(&model, path)?)),
         None => None,

@@ -418,7 +418,9 @@ fn a_launched_tricycle_reaches_a_target_from_rclpy_on_mujoco() {
         "tricycle: closest approach {closest:.4} m, final {error:.4} m, tipped over {}",
         out["diagnostics"]["tipped_over"]
     );
-    // A robot whose goals went astray never comes near; one that fell on the way neither.
+    // A robot whose goals went astray never comes near; one that fell on the way neither. A
+    // fall after coming close is not asserted against: 17 of those 180 rollouts fell (9 %),
+    // and the policy's falls are measured by `kumi eval whole-body`, not here.
     assert!(closest < TRICYCLE_CLOSEST_P90, "{out}");
 }
 

@@ -41,7 +41,7 @@ pub enum Hold {
     #[error("policy failed: {0}")]
     PolicyFailed(String),
     /// The base tilted past the limit; held until a new target.
-    #[error("tipped over: the base tilted {tilt_rad:.3} rad, past the policy's {limit_rad:.3} rad; send a new target to go on")]
+    #[error("tipped over: the base tilted {tilt_rad:.3} rad, past the policy's {limit_rad:.3} rad; send a different target to go on")]
     TippedOver { tilt_rad: f64, limit_rad: f64 },
 }
 
@@ -60,6 +60,8 @@ pub struct Decision {
     /// The observation and the action, when the policy ran.
     pub observation: Option<Vec<f32>>,
     pub action: Option<Vec<f32>>,
+    /// This step found the base tipped over (the hold for it begins).
+    pub tipped_over_now: bool,
 }
 
 /// One robot's upper-level controller.
@@ -146,6 +148,11 @@ impl WholeBodyController {
     /// A new target; it also ends a hold for having tipped over.
     pub fn set_target(&mut self, target: Target) {
         self.target = Some(target);
+        self.rearm();
+    }
+
+    /// Ends a hold for having tipped over (a new target, a restarted simulator).
+    pub fn rearm(&mut self) {
         self.tipped_rad = None;
     }
 
@@ -167,15 +174,18 @@ impl WholeBodyController {
         };
         if let Some(limit_rad) = self.tilt_limit_rad {
             let tilt_rad = kumi_terms::termination::tilt(&state.base.pose_w.rotation);
-            if tilt_rad > limit_rad {
-                self.tipped_rad = Some(self.tipped_rad.unwrap_or(tilt_rad));
+            let now = self.tipped_rad.is_none() && tilt_rad > limit_rad;
+            if now {
+                self.tipped_rad = Some(tilt_rad);
             }
             if let Some(tilt_rad) = self.tipped_rad {
                 let why = Hold::TippedOver {
                     tilt_rad,
                     limit_rad,
                 };
-                return self.hold(why, Some(tool_pose_w));
+                let mut decision = self.hold(why, Some(tool_pose_w));
+                decision.tipped_over_now = now;
+                return decision;
             }
         }
         let wheels: Vec<f64> = self
@@ -227,6 +237,7 @@ impl WholeBodyController {
             tool_pose_w: Some(tool_pose_w),
             observation: Some(obs),
             action: Some(action),
+            tipped_over_now: false,
         }
     }
 
@@ -250,6 +261,7 @@ impl WholeBodyController {
             tool_pose_w,
             observation: None,
             action: None,
+            tipped_over_now: false,
         }
     }
 }
@@ -317,6 +329,7 @@ mod tests {
         c.set_target(target(1.0));
         assert!(c.step(&state(&c, 0.7)).action.is_some(), "within the limit");
         let tipped = c.step(&state(&c, 0.9));
+        assert!(tipped.tipped_over_now);
         match tipped.hold {
             Some(Hold::TippedOver {
                 tilt_rad,
@@ -329,8 +342,14 @@ mod tests {
         assert!(tipped.wheel_velocities.iter().all(|(_, v)| *v == 0.0));
         assert_eq!(tipped.wheel_velocities.len(), 3);
         assert!(tipped.goals.is_some());
-        // Upright again: still holding, at the tilt it tipped over at.
-        assert_eq!(c.step(&state(&c, 0.0)).hold, tipped.hold);
+        // Upright again: still holding, at the tilt it tipped over at, once tipped.
+        let still = c.step(&state(&c, 0.0));
+        assert_eq!(still.hold, tipped.hold);
+        assert!(!still.tipped_over_now);
+        // A restarted simulator re-arms it, as a new target does.
+        c.rearm();
+        assert!(c.step(&state(&c, 0.0)).action.is_some());
+        assert!(c.step(&state(&c, 1.0)).tipped_over_now);
         c.set_target(target(2.0));
         assert!(
             c.step(&state(&c, 0.0)).action.is_some(),

@@ -440,6 +440,7 @@ pub fn run(
                         if last_odom_stamp.is_some_and(|before| stamp < before) {
                             info!("odometry time went back (a restarted simulator); starting over");
                             report.sim_restarts += 1;
+                            controller.rearm();
                             report.target_since_s = None;
                             tick.forget();
                         }
@@ -542,8 +543,9 @@ pub fn run(
             }
         };
         if let Some((decision, stamp)) = decision {
-            let began = report.step(decision.hold.as_ref());
-            if let (true, Some(h @ Hold::TippedOver { .. })) = (began, &decision.hold) {
+            report.step(decision.hold.as_ref());
+            if let (true, Some(h)) = (decision.tipped_over_now, &decision.hold) {
+                report.tipped_over += 1;
                 warn!("stopped: {h}");
             }
             if decision.action.is_some() && report.target_since_s.is_none() {
