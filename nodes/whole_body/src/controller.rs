@@ -17,6 +17,7 @@
 use kumi_model::RobotModel;
 use kumi_policies::observation::Goal;
 use kumi_terms::observation::{self, BodyState};
+use kumi_terms::termination;
 use kumi_terms::{ActionTerms, Target, ToolChain};
 use nalgebra::Isometry3;
 
@@ -173,10 +174,10 @@ impl WholeBodyController {
             return self.hold(Hold::NoTarget, Some(tool_pose_w));
         };
         if let Some(limit_rad) = self.tilt_limit_rad {
-            let tilt_rad = kumi_terms::termination::tilt(&state.base.pose_w.rotation);
-            let now = self.tipped_rad.is_none() && tilt_rad > limit_rad;
+            let rotation = &state.base.pose_w.rotation;
+            let now = self.tipped_rad.is_none() && termination::fallen(rotation, limit_rad);
             if now {
-                self.tipped_rad = Some(tilt_rad);
+                self.tipped_rad = Some(termination::tilt(rotation));
             }
             if let Some(tilt_rad) = self.tipped_rad {
                 let why = Hold::TippedOver {
