@@ -105,6 +105,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
                 episodes: None,
                 trace: None,
                 traced: 0,
+                action_noise: 0.0,
             })
             .with_context(|| format!("evaluating the {variant} policy of {robot}"))?;
             for evaluation in results.evaluations {
@@ -653,6 +654,7 @@ mod tests {
                 leg_orientation_rad: stats(|e| e.leg),
                 contacts_per_episode: stats(|e| e.contacts as f64),
                 terminations: 0,
+                action_noise: 0.0,
                 episodes,
             },
         }

@@ -70,6 +70,19 @@ pub struct EvalBodyArgs {
     /// How many episodes `--trace` records.
     #[arg(long, default_value_t = 10)]
     pub traced: usize,
+    /// Standard deviation of Gaussian noise added to every action value (policy units, before
+    /// the terms clip and scale it), as training explores: how the policy fares off its mean.
+    /// 0 runs the deterministic policy.
+    #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
+    pub action_noise: f64,
+}
+
+/// A finite number of at least 0.
+fn non_negative(text: &str) -> std::result::Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{text}` is not a finite number of at least 0")),
+    }
 }
 
 pub fn run(what: EvalCommand) -> Result<()> {
@@ -211,6 +224,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
                 rollouts: args.rollouts,
                 seed: args.seed,
                 traced: if args.trace.is_some() { args.traced } else { 0 },
+                action_noise: args.action_noise,
             },
             || {
                 let mut policy = WholeBodyPolicy::load(&path, &expected, args.backend)

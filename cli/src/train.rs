@@ -681,6 +681,35 @@ mod tests {
         }
     }
 
+    #[test]
+    fn tricycles_second_stage_config_changes_only_ppo() {
+        // The shipped policy is tricycle.toml resumed with tricycle_settle.toml: the task,
+        // reward and action bounds it trained on must stay the first stage's.
+        let first = read_body_config(None, "tricycle", Variant::Hierarchical).unwrap();
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../train/configs/whole_body/tricycle_settle.toml");
+        let second = read_body_config(Some(&path), "tricycle", Variant::Hierarchical).unwrap();
+        assert_eq!(second.task, first.task);
+        assert_eq!(second.reward, first.reward);
+        assert_eq!(second.action, first.action);
+        assert_eq!(second.penalty, first.penalty);
+        // It goes on where the first stage stopped, its noise falling from there.
+        assert!(second.ppo.total_steps > first.ppo.total_steps);
+        let start = second.ppo.total_steps as f64 * second.ppo.anneal_after;
+        assert!((start - first.ppo.total_steps as f64).abs() < 4096.0, "{start}");
+        let cap = second.ppo.log_std_cap(first.ppo.total_steps).unwrap();
+        assert!((cap - first.ppo.initial_log_std).abs() < 1e-3, "{cap}");
+        assert_eq!(
+            PpoConfig {
+                total_steps: first.ppo.total_steps,
+                anneal_after: first.ppo.anneal_after,
+                final_log_std: None,
+                ..second.ppo.clone()
+            },
+            first.ppo
+        );
+    }
+
     /// The manipulator tool's height [m] with the robot standing at home.
     fn standing_tool_height_m(robot: &str) -> f64 {
         let model = load_model(robot).unwrap();

@@ -331,6 +331,53 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
 }
 
 #[test]
+fn action_noise_in_evaluation_changes_episodes_reproducibly_and_must_be_a_std() {
+    let eval = |noise: &str| -> serde_json::Value {
+        kumi_json(&[
+            "eval",
+            "whole-body",
+            "minimal",
+            "--rollouts",
+            "3",
+            "--backend",
+            "tract",
+            "--engine",
+            "rapier",
+            "--action-noise",
+            noise,
+            "--json",
+        ])
+    };
+    let (clean, noisy) = (eval("0"), eval("0.5"));
+    assert_eq!(
+        (
+            clean["action_noise"].as_f64(),
+            noisy["action_noise"].as_f64()
+        ),
+        (Some(0.0), Some(0.5))
+    );
+    let outcome = |v: &serde_json::Value| {
+        (
+            v["position_error_m"]["mean"].to_string(),
+            v["terminations"].to_string(),
+        )
+    };
+    assert_ne!(
+        outcome(&clean),
+        outcome(&noisy),
+        "noise changes the episodes"
+    );
+    assert_eq!(
+        noisy,
+        eval("0.5"),
+        "the same noise again: seeded by the episode"
+    );
+    let bad = kumi(&["eval", "whole-body", "minimal", "--action-noise=-1"]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("at least 0"), "{err}");
+}
+
+#[test]
 fn the_flat_baseline_trains_evaluates_and_is_not_taken_for_a_policy_over_the_skill() {
     let out_dir = std::env::temp_dir().join(format!("kumi-train-flat-{}", std::process::id()));
     let out = kumi(&[

@@ -344,6 +344,7 @@ pub fn whole_body_config(
             w_a: 0.005,
             alive: 0.2,
             fall: 0.0,
+            tilt: 0.0,
         },
         penalty: Default::default(),
         arms: kumi_train::whole_body::ArmControl::Skill(bounds),

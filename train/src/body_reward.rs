@@ -29,6 +29,12 @@ pub struct BodyWeights {
     /// fingerprints still hold.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub fall: f64,
+    /// Base tilt penalty `-tilt * sin^2(tilt angle)` per step: the squared horizontal part of
+    /// gravity in the base frame (Isaac Lab's `flat_orientation_l2`; kumi's, the paper has
+    /// none). It costs a robot that starts to tip before the tilt limit ends the episode.
+    /// Absent in a config: 0, and left out of the serialised config like `fall`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub tilt: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -63,6 +69,8 @@ pub struct BodyTerms {
     pub alive: f64,
     /// The fall penalty (0 on every step but the one that falls).
     pub fall: f64,
+    /// The base tilt penalty.
+    pub tilt: f64,
     /// Eq. 5 (penalty baseline only).
     pub leg_orientation: f64,
     /// Eq. 6 (penalty baseline only).
@@ -78,6 +86,7 @@ impl BodyTerms {
             + self.action_rate
             + self.alive
             + self.fall
+            + self.tilt
             + self.leg_orientation
             + self.contact
     }
@@ -100,6 +109,12 @@ pub fn fall_penalty(w_fall: f64, fell: bool) -> f64 {
     } else {
         0.0
     }
+}
+
+/// `-w_tilt sin^2(tilt_rad)`: the squared horizontal part of gravity seen from a base tilted
+/// by `tilt_rad` ([`tilt`]).
+pub fn tilt_penalty(w_tilt: f64, tilt_rad: f64) -> f64 {
+    -w_tilt * tilt_rad.sin().powi(2)
 }
 
 /// Eq. 6: `-w_c` when an undesired arm contact occurs, else 0.
@@ -153,6 +168,7 @@ mod tests {
         w_a: 0.1,
         alive: 0.2,
         fall: 0.0,
+        tilt: 0.0,
     };
 
     #[test]
@@ -197,5 +213,20 @@ mod tests {
             ..BodyTerms::default()
         };
         assert_eq!(t.total(), -19.8);
+    }
+
+    #[test]
+    fn the_tilt_penalty_by_hand() {
+        // sin(0.3) = 0.2955202: 3 x 0.0873322 = 0.2619966.
+        assert!((tilt_penalty(3.0, 0.3) + 0.261_996_6).abs() < 1e-6);
+        assert_eq!(tilt_penalty(3.0, 0.0), 0.0);
+        // Lying on its side (pi / 2) costs the whole weight.
+        assert!((tilt_penalty(3.0, std::f64::consts::FRAC_PI_2) + 3.0).abs() < 1e-12);
+        let t = BodyTerms {
+            alive: 0.5,
+            tilt: -0.25,
+            ..BodyTerms::default()
+        };
+        assert_eq!(t.total(), 0.25);
     }
 }

@@ -10,6 +10,9 @@ use kumi_model::{RobotModel, Role};
 use kumi_terms::observation::{tool_yaw, Target};
 use kumi_worlds::{SimWorld, GROUND};
 use nalgebra::Vector3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 use crate::evaluate::{ErrorStats, EvalError};
@@ -31,6 +34,10 @@ pub struct BodyEvaluation {
     pub contacts_per_episode: ErrorStats,
     /// Episodes that ended by a fall (base tilt past the limit) or diverged physics.
     pub terminations: usize,
+    /// Standard deviation of the Gaussian noise added to every action [policy units]; 0: the
+    /// deterministic policy.
+    #[serde(default)]
+    pub action_noise: f64,
     /// Every episode's outcome, in seed order (for plots; not printed).
     #[serde(skip)]
     pub episodes: Vec<Episode>,
@@ -56,7 +63,14 @@ impl BodyEvaluation {
             row("undesired contacts [steps/episode]", &self.contacts_per_episode),
             self.terminations,
             self.rollouts,
-        )
+        ) + &if self.action_noise > 0.0 {
+            format!(
+                "\nWith Gaussian noise of std {} (policy units) on every action.\n",
+                self.action_noise
+            )
+        } else {
+            String::new()
+        }
     }
 }
 
@@ -245,6 +259,37 @@ pub struct Protocol {
     pub seed: u64,
     /// The first `traced` episodes keep every step ([`Episode::trace`]).
     pub traced: usize,
+    /// Standard deviation of Gaussian noise added to every action value [policy units] before
+    /// the action terms clip and scale it, as training explores; 0 runs the policy's mean.
+    /// Drawn from the episode's own stream, so results do not depend on threads either.
+    pub action_noise: f64,
+}
+
+/// Gaussian noise on the policy's actions, one stream per episode (apart from the stream that
+/// draws the episode's start and target).
+struct ActionNoise {
+    std: f32,
+    rng: ChaCha8Rng,
+}
+
+impl ActionNoise {
+    fn new(std: f64, episode_seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(episode_seed);
+        rng.set_stream(1);
+        Self {
+            std: std as f32,
+            rng,
+        }
+    }
+
+    fn add(&mut self, action: &mut [f32]) {
+        if self.std > 0.0 {
+            for a in action {
+                let z: f32 = StandardNormal.sample(&mut self.rng);
+                *a += self.std * z;
+            }
+        }
+    }
 }
 
 /// Evaluates a whole-body policy over the protocol's episodes. `make_policy` builds one policy
@@ -264,6 +309,7 @@ where
         rollouts,
         seed,
         traced,
+        action_noise,
     } = protocol;
     let rule = ContactRule::new(&model);
     let episodes: Vec<Episode> = (0..rollouts)
@@ -278,7 +324,9 @@ where
                 let (policy, env) = state
                     .as_mut()
                     .map_err(|e| EvalError::Policy(e.to_string()))?;
-                env.reseed(seed.wrapping_mul(1_000_003).wrapping_add(k as u64));
+                let episode_seed = seed.wrapping_mul(1_000_003).wrapping_add(k as u64);
+                env.reseed(episode_seed);
+                let mut noise = ActionNoise::new(action_noise, episode_seed);
                 let mut obs = env.reset();
                 let start_position = env.errors().0;
                 let (mut contacts, mut closest, mut steps) = (0, start_position, 0);
@@ -287,7 +335,8 @@ where
                     trace.push(TraceStep::of(env));
                 }
                 loop {
-                    let action = policy(&obs).map_err(EvalError::Policy)?;
+                    let mut action = policy(&obs).map_err(EvalError::Policy)?;
+                    noise.add(&mut action);
                     let out = env.step(&action);
                     if k < traced {
                         trace.push(TraceStep::of(env));
@@ -332,6 +381,7 @@ where
         leg_orientation_rad: stats(&|e| e.leg, false),
         contacts_per_episode: stats(&|e| e.contacts as f64, true),
         terminations: episodes.len() - finished.len(),
+        action_noise,
         episodes,
     })
 }

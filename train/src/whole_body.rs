@@ -26,8 +26,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::arm_reach::EnvError;
 use crate::body_reward::{
-    body_terms, contact_penalty, fall_penalty, fallen, leg_orientation_reward, BodyTerms,
-    BodyWeights, PenaltyWeights,
+    body_terms, contact_penalty, fall_penalty, fallen, leg_orientation_reward, tilt, tilt_penalty,
+    BodyTerms, BodyWeights, PenaltyWeights,
 };
 use crate::evaluate_body::{leg_angles, ContactRule};
 
@@ -408,6 +408,10 @@ impl WholeBody {
             self.config.task.tilt_limit_rad,
         );
         terms.fall = fall_penalty(self.config.weights.fall, fell);
+        terms.tilt = tilt_penalty(
+            self.config.weights.tilt,
+            tilt(&self.world.base_pose().rotation),
+        );
         let terminated = self.world.diverged() || fell;
         BodyStep {
             observation: self.observation(),

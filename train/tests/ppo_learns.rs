@@ -84,6 +84,39 @@ fn reward_improves_on_a_tiny_task() {
 }
 
 #[test]
+fn a_noise_schedule_brings_the_action_std_down_to_its_final_value() {
+    let envs = (0..8)
+        .map(|i| PointReach {
+            x: 0.0,
+            target: 0.0,
+            t: 0,
+            rng: ChaCha8Rng::seed_from_u64(i),
+        })
+        .collect();
+    // Four iterations of 512 steps; the cap falls from -0.5 right away to -2.0 at the end.
+    let config = PpoConfig {
+        num_envs: 8,
+        rollout_steps: 64,
+        total_steps: 4 * 512,
+        hidden: vec![16],
+        entropy_coef: 0.05, // pushes the noise up: only the cap brings it down
+        anneal_after: 0.0,
+        final_log_std: Some(-2.0),
+        ..PpoConfig::default()
+    };
+    let mut t = Trainer::new(config, envs).unwrap();
+    let stds: Vec<f64> = (0..4).map(|_| t.iterate().action_std).collect();
+    for (k, std) in stds.iter().enumerate() {
+        let cap = (-0.5 - 1.5 * (k + 1) as f64 / 4.0).exp();
+        assert!(
+            *std <= cap + 1e-6,
+            "iteration {k}: std {std} above the cap {cap}"
+        );
+    }
+    assert!((stds[3] - (-2.0f64).exp()).abs() < 1e-6, "{stds:?}");
+}
+
+#[test]
 fn training_is_reproducible_for_a_seed() {
     let run = |seed| {
         let mut t = trainer(seed);

@@ -42,6 +42,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             w_a: 0.005,
             alive: 0.0,
             fall: 0.0,
+            tilt: 0.0,
         },
         penalty: PenaltyWeights::default(),
         arms: ArmControl::Skill(GoalBounds {

@@ -54,6 +54,12 @@ pub struct PpoConfig {
     /// What the learning rate and the entropy coefficient are multiplied by at the end.
     #[serde(default = "one")]
     pub anneal_final: f64,
+    /// When set, the policy's log standard deviation is capped by a schedule
+    /// ([`PpoConfig::log_std_cap`]): `initial_log_std` until `anneal_after`, then falling
+    /// linearly to this value at the end. Without it the noise is learnt alone, and under an
+    /// adaptive learning rate at its floor it barely moves from `initial_log_std`.
+    #[serde(default)]
+    pub final_log_std: Option<f32>,
 }
 
 fn one() -> f64 {
@@ -69,6 +75,19 @@ impl PpoConfig {
         }
         let t = ((progress - self.anneal_after) / (1.0 - self.anneal_after)).min(1.0);
         1.0 + (self.anneal_final - 1.0) * t
+    }
+
+    /// The largest log standard deviation allowed at `env_steps`, when `final_log_std` is set:
+    /// `initial_log_std` until `anneal_after`, `final_log_std` at the end, linear between.
+    pub fn log_std_cap(&self, env_steps: u64) -> Option<f32> {
+        let last = self.final_log_std?;
+        let progress = env_steps as f64 / self.total_steps.max(1) as f64;
+        let t = if self.anneal_after >= 1.0 || progress <= self.anneal_after {
+            0.0
+        } else {
+            ((progress - self.anneal_after) / (1.0 - self.anneal_after)).min(1.0)
+        };
+        Some(self.initial_log_std + (last - self.initial_log_std) * t as f32)
     }
 
     /// Why this config cannot train, if it cannot.
@@ -92,6 +111,14 @@ impl PpoConfig {
             || self.anneal_final <= 0.0
         {
             return Err("anneal_after must lie in [0, 1] and anneal_final be positive".into());
+        }
+        if let Some(last) = self.final_log_std {
+            if !last.is_finite() || last > self.initial_log_std {
+                return Err(format!(
+                    "final_log_std ({last}) must be finite and at most initial_log_std ({})",
+                    self.initial_log_std
+                ));
+            }
         }
         Ok(())
     }
@@ -117,6 +144,7 @@ impl Default for PpoConfig {
             initial_log_std: -0.5,
             anneal_after: 1.0,
             anneal_final: 1.0,
+            final_log_std: None,
         }
     }
 }
@@ -363,6 +391,9 @@ impl Learner {
                 sum.clip_fraction += loss.clip_fraction;
                 count += 1.0;
             }
+        }
+        if let Some(cap) = self.config.log_std_cap(env_steps) {
+            self.net.log_std.iter_mut().for_each(|l| *l = l.min(cap));
         }
         Loss {
             total: sum.total / count,
@@ -727,6 +758,25 @@ mod tests {
     }
 
     #[test]
+    fn the_noise_cap_by_hand() {
+        let c = PpoConfig {
+            total_steps: 1000,
+            initial_log_std: -0.5,
+            anneal_after: 0.6,
+            final_log_std: Some(-1.5),
+            ..PpoConfig::default()
+        };
+        assert_eq!(c.log_std_cap(0), Some(-0.5));
+        assert_eq!(c.log_std_cap(600), Some(-0.5));
+        // Halfway through the annealed part: -0.5 + (-1.5 + 0.5) * 0.5 = -1.0.
+        assert!((c.log_std_cap(800).unwrap() + 1.0).abs() < 1e-6);
+        assert_eq!(c.log_std_cap(1000), Some(-1.5));
+        assert_eq!(c.log_std_cap(9000), Some(-1.5), "held at the end");
+        // Off by default: the noise is learnt alone.
+        assert_eq!(PpoConfig::default().log_std_cap(1000), None);
+    }
+
+    #[test]
     fn configs_that_cannot_train_are_refused() {
         assert!(PpoConfig::default().check().is_ok());
         for bad in [
@@ -744,6 +794,14 @@ mod tests {
             },
             PpoConfig {
                 anneal_after: 1.5,
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                final_log_std: Some(0.0), // above initial_log_std (-0.5): noise would grow
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                final_log_std: Some(f32::NAN),
                 ..PpoConfig::default()
             },
         ] {
