@@ -696,7 +696,10 @@ mod tests {
         // It goes on where the first stage stopped, its noise falling from there.
         assert!(second.ppo.total_steps > first.ppo.total_steps);
         let start = second.ppo.total_steps as f64 * second.ppo.anneal_after;
-        assert!((start - first.ppo.total_steps as f64).abs() < 4096.0, "{start}");
+        assert!(
+            (start - first.ppo.total_steps as f64).abs() < 4096.0,
+            "{start}"
+        );
         let cap = second.ppo.log_std_cap(first.ppo.total_steps).unwrap();
         assert!((cap - first.ppo.initial_log_std).abs() < 1e-3, "{cap}");
         assert_eq!(
