@@ -228,5 +228,12 @@ mod tests {
             ..BodyTerms::default()
         };
         assert_eq!(t.total(), 0.25);
+        // Unset, it stays out of the serialised weights: older configs keep their fingerprints.
+        let text = serde_json::to_string(&W).unwrap();
+        assert!(!text.contains("tilt") && !text.contains("fall"), "{text}");
+        let with = BodyWeights { tilt: 3.0, ..W };
+        assert!(serde_json::to_string(&with)
+            .unwrap()
+            .contains("\"tilt\":3.0"));
     }
 }

@@ -57,8 +57,9 @@ pub struct PpoConfig {
     /// When set, the policy's log standard deviation is capped by a schedule
     /// ([`PpoConfig::log_std_cap`]): `initial_log_std` until `anneal_after`, then falling
     /// linearly to this value at the end. Without it the noise is learnt alone, and under an
-    /// adaptive learning rate at its floor it barely moves from `initial_log_std`.
-    #[serde(default)]
+    /// adaptive learning rate at its floor it barely moves from `initial_log_std`. Left out
+    /// of the serialised config when unset, so configs without it keep their fingerprints.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub final_log_std: Option<f32>,
 }
 
@@ -118,6 +119,11 @@ impl PpoConfig {
                     "final_log_std ({last}) must be finite and at most initial_log_std ({})",
                     self.initial_log_std
                 ));
+            }
+            if self.anneal_after >= 1.0 {
+                return Err(
+                    "final_log_std needs anneal_after below 1: the noise falls after it".into(),
+                );
             }
         }
         Ok(())
@@ -777,6 +783,22 @@ mod tests {
     }
 
     #[test]
+    fn an_unset_noise_schedule_leaves_the_config_fingerprint_alone() {
+        // Exported policies record a fingerprint of their config's values: configs written
+        // before `final_log_std` existed must serialise as they did.
+        let text = serde_json::to_string(&PpoConfig::default()).unwrap();
+        assert!(!text.contains("final_log_std"), "{text}");
+        let set = PpoConfig {
+            final_log_std: Some(-1.9),
+            anneal_after: 0.75,
+            ..PpoConfig::default()
+        };
+        assert!(serde_json::to_string(&set)
+            .unwrap()
+            .contains("\"final_log_std\":-1.9"));
+    }
+
+    #[test]
     fn configs_that_cannot_train_are_refused() {
         assert!(PpoConfig::default().check().is_ok());
         for bad in [
@@ -798,10 +820,17 @@ mod tests {
             },
             PpoConfig {
                 final_log_std: Some(0.0), // above initial_log_std (-0.5): noise would grow
+                anneal_after: 0.5,
                 ..PpoConfig::default()
             },
             PpoConfig {
                 final_log_std: Some(f32::NAN),
+                anneal_after: 0.5,
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                final_log_std: Some(-1.0), // never reached: nothing anneals
+                anneal_after: 1.0,
                 ..PpoConfig::default()
             },
         ] {
