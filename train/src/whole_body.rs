@@ -408,10 +408,12 @@ impl WholeBody {
             self.config.task.tilt_limit_rad,
         );
         terms.fall = fall_penalty(self.config.weights.fall, fell);
-        terms.tilt = tilt_penalty(
-            self.config.weights.tilt,
-            tilt(&self.world.base_pose().rotation),
-        );
+        if self.config.weights.tilt != 0.0 {
+            terms.tilt = tilt_penalty(
+                self.config.weights.tilt,
+                tilt(&self.world.base_pose().rotation),
+            );
+        }
         let terminated = self.world.diverged() || fell;
         BodyStep {
             observation: self.observation(),

@@ -42,15 +42,20 @@ impl Environment for PointReach {
     }
 }
 
-fn trainer(seed: u64) -> Trainer<PointReach> {
-    let envs = (0..8)
+/// `n` environments at x = 0, environment `i` drawing its targets from seed `first_seed + i`.
+fn point_reaches(n: u64, first_seed: u64) -> Vec<PointReach> {
+    (0..n)
         .map(|i| PointReach {
             x: 0.0,
             target: 0.0,
             t: 0,
-            rng: ChaCha8Rng::seed_from_u64(seed * 100 + i),
+            rng: ChaCha8Rng::seed_from_u64(first_seed + i),
         })
-        .collect();
+        .collect()
+}
+
+fn trainer(seed: u64) -> Trainer<PointReach> {
+    let envs = point_reaches(8, seed * 100);
     let config = PpoConfig {
         seed,
         num_envs: 8,
@@ -85,14 +90,7 @@ fn reward_improves_on_a_tiny_task() {
 
 #[test]
 fn a_noise_schedule_brings_the_action_std_down_to_its_final_value() {
-    let envs = (0..8)
-        .map(|i| PointReach {
-            x: 0.0,
-            target: 0.0,
-            t: 0,
-            rng: ChaCha8Rng::seed_from_u64(i),
-        })
-        .collect();
+    let envs = point_reaches(8, 0);
     // Four iterations of 512 steps; the cap falls from -0.5 right away to -2.0 at the end.
     let config = PpoConfig {
         num_envs: 8,
@@ -147,14 +145,7 @@ fn a_checkpoint_restores_the_policy_exactly() {
     assert_eq!((b.iteration, b.env_steps), (3, 3 * 8 * 64));
     assert_eq!(a.norm, b.norm);
     // A checkpoint from another network shape is refused with a clear error.
-    let envs = (0..2)
-        .map(|i| PointReach {
-            x: 0.0,
-            target: 0.0,
-            t: 0,
-            rng: ChaCha8Rng::seed_from_u64(i),
-        })
-        .collect();
+    let envs = point_reaches(2, 0);
     let mut other = Trainer::new(
         PpoConfig {
             hidden: vec![8],
@@ -174,18 +165,7 @@ fn without_updates_the_policy_does_not_move() {
     // divergence and the clipped fraction are 0 (a check on the bookkeeping of old log-probs).
     let mut t = trainer(3);
     t.learner.config.learning_rate = 0.0;
-    let mut t = Trainer::new(
-        t.learner.config.clone(),
-        (0..8)
-            .map(|i| PointReach {
-                x: 0.0,
-                target: 0.0,
-                t: 0,
-                rng: ChaCha8Rng::seed_from_u64(i),
-            })
-            .collect(),
-    )
-    .unwrap();
+    let mut t = Trainer::new(t.learner.config.clone(), point_reaches(8, 0)).unwrap();
     for _ in 0..3 {
         let s = t.iterate();
         assert!(s.approx_kl.abs() < 1e-6, "KL {}", s.approx_kl);

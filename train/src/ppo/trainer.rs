@@ -70,25 +70,29 @@ fn one() -> f64 {
 impl PpoConfig {
     /// The annealing factor at `env_steps` (1 before `anneal_after`, `anneal_final` at the end).
     pub fn anneal(&self, env_steps: u64) -> f64 {
-        let progress = env_steps as f64 / self.total_steps.max(1) as f64;
-        if progress <= self.anneal_after || self.anneal_after >= 1.0 {
+        let t = self.anneal_progress(env_steps);
+        if t == 0.0 {
             return 1.0;
         }
-        let t = ((progress - self.anneal_after) / (1.0 - self.anneal_after)).min(1.0);
         1.0 + (self.anneal_final - 1.0) * t
+    }
+
+    /// How far the annealed part has gone at `env_steps`: 0 until `anneal_after` (and always,
+    /// when `anneal_after` is 1), 1 at `total_steps` and after, linear between.
+    fn anneal_progress(&self, env_steps: u64) -> f64 {
+        let progress = env_steps as f64 / self.total_steps.max(1) as f64;
+        if progress <= self.anneal_after || self.anneal_after >= 1.0 {
+            return 0.0;
+        }
+        ((progress - self.anneal_after) / (1.0 - self.anneal_after)).min(1.0)
     }
 
     /// The largest log standard deviation allowed at `env_steps`, when `final_log_std` is set:
     /// `initial_log_std` until `anneal_after`, `final_log_std` at the end, linear between.
     pub fn log_std_cap(&self, env_steps: u64) -> Option<f32> {
         let last = self.final_log_std?;
-        let progress = env_steps as f64 / self.total_steps.max(1) as f64;
-        let t = if self.anneal_after >= 1.0 || progress <= self.anneal_after {
-            0.0
-        } else {
-            ((progress - self.anneal_after) / (1.0 - self.anneal_after)).min(1.0)
-        };
-        Some(self.initial_log_std + (last - self.initial_log_std) * t as f32)
+        let t = self.anneal_progress(env_steps) as f32;
+        Some(self.initial_log_std + (last - self.initial_log_std) * t)
     }
 
     /// Why this config cannot train, if it cannot.
