@@ -225,6 +225,7 @@ fn goal_for(model: &RobotModel, module: &ModuleInstance, leg_roll_rad: f64) -> R
         manipulator_rotation_rad: 0.0,
         leg_position_m: 0.0,
         leg_roll_rad: leg_roll_rad.abs(),
+        wheel_velocity_rad_s: None,
     };
     let term = ArmGoalTerm::new(model, module, &bounds)?;
     let mut action = vec![0.0_f32; term.width()];

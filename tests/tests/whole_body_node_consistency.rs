@@ -27,6 +27,7 @@ const BOUNDS: GoalBounds = GoalBounds {
     manipulator_rotation_rad: 0.5,
     leg_position_m: 0.1,
     leg_roll_rad: 0.5,
+    wheel_velocity_rad_s: None,
 };
 
 fn env(model: Arc<RobotModel>, engine: Engine) -> WholeBody {

@@ -50,6 +50,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             manipulator_rotation_rad: 0.5,
             leg_position_m: 0.1,
             leg_roll_rad: 0.5,
+            wheel_velocity_rad_s: None,
         }),
     }
 }
@@ -151,6 +152,7 @@ fn the_flat_baseline_is_the_same_environment_with_joint_targets_and_the_arms_sta
     let flat = |engine_config: WholeBodyConfig| WholeBodyConfig {
         arms: ArmControl::Joints(JointBounds {
             joint_scale_rad: 0.5,
+            wheel_velocity_rad_s: None,
         }),
         ..engine_config
     };

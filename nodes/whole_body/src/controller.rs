@@ -285,6 +285,7 @@ mod tests {
             manipulator_rotation_rad: 0.5,
             leg_position_m: 0.05,
             leg_roll_rad: 1.5,
+            wheel_velocity_rad_s: None,
         };
         let terms = ActionTerms::new(&model, &bounds).unwrap();
         let size = terms.size();

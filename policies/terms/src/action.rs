@@ -25,6 +25,10 @@ pub struct GoalBounds {
     pub leg_position_m: f64,
     /// Leg: largest roll [rad] about the tool's own x axis.
     pub leg_roll_rad: f64,
+    /// Largest wheel velocity [rad/s] the policy may command (for an action of 1); absent or
+    /// above a wheel module's own limit, that limit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheel_velocity_rad_s: Option<f64>,
 }
 
 impl GoalBounds {
@@ -40,17 +44,29 @@ impl GoalBounds {
                 name,
                 value: *value,
             }),
-            None => Ok(()),
+            None => check_wheel_velocity(self.wheel_velocity_rad_s),
         }
+    }
+}
+
+/// A wheel velocity bound must be finite and positive.
+fn check_wheel_velocity(bound: Option<f64>) -> Result<(), TermError> {
+    match bound {
+        Some(v) if !(v.is_finite() && v > 0.0) => Err(TermError::Bound {
+            name: "wheel_velocity_rad_s",
+            value: v,
+        }),
+        _ => Ok(()),
     }
 }
 
 impl GoalBounds {
     /// The bounds a policy was trained with, read back from its action description
     /// ([`ActionTerms::describe`], the `kumi.action` metadata): a deployed node takes them from
-    /// the policy file, not from a training config. Bounds of a role the robot lacks are 0. The
-    /// caller still checks the whole contract: terms built from these bounds must describe
-    /// themselves exactly as the file does.
+    /// the policy file, not from a training config. Bounds of a role the robot lacks are 0; the
+    /// wheel bound is the largest wheel velocity described (none without wheels). The caller
+    /// still checks the whole contract: terms built from these bounds must describe themselves
+    /// exactly as the file does.
     pub fn from_description(description: &str) -> Result<Self, TermError> {
         let bad = |why: String| TermError::Description(why);
         let mut bounds = GoalBounds {
@@ -58,6 +74,7 @@ impl GoalBounds {
             manipulator_rotation_rad: 0.0,
             leg_position_m: 0.0,
             leg_roll_rad: 0.0,
+            wheel_velocity_rad_s: None,
         };
         let mut seen: Vec<(&str, f64, f64)> = Vec::new();
         for entry in description.split(';').filter(|e| !e.is_empty()) {
@@ -65,9 +82,6 @@ impl GoalBounds {
             let role = *fields
                 .get(1)
                 .ok_or_else(|| bad(format!("`{entry}` names no role")))?;
-            if role == "wheel" {
-                continue;
-            }
             if fields.get(3) == Some(&"joint_targets") {
                 return Err(bad(format!(
                     "`{entry}`: a flat baseline policy (joint targets), not a policy over the skill"
@@ -81,6 +95,15 @@ impl GoalBounds {
                     .and_then(|v| v.parse::<f64>().ok())
                     .ok_or_else(|| bad(format!("`{entry}`: no number `{key}=` in field {i}")))
             };
+            if role == "wheel" {
+                let velocity = value(3, "velocity_rad_s")?;
+                bounds.wheel_velocity_rad_s = Some(
+                    bounds
+                        .wheel_velocity_rad_s
+                        .map_or(velocity, |v| v.max(velocity)),
+                );
+                continue;
+            }
             let position = value(3, "position_m")?;
             let rotation = match role {
                 "manipulator" => value(4, "rotation_rad")?,
@@ -257,13 +280,17 @@ impl JointTargetTerm {
 pub struct JointBounds {
     /// Largest offset of each arm joint's target from its home angle [rad].
     pub joint_scale_rad: f64,
+    /// As [`GoalBounds::wheel_velocity_rad_s`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheel_velocity_rad_s: Option<f64>,
 }
 
 /// One velocity for both wheels of a wheel module.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WheelTerm {
     pub module: String,
-    /// Wheel velocity for an action of 1 [rad/s]: the wheels' velocity limit.
+    /// Wheel velocity for an action of 1 [rad/s]: the wheels' velocity limit, or the policy's
+    /// wheel bound where that is lower.
     pub scale_rad_s: f64,
     /// Wheels of the module (velocity joints).
     pub wheels: usize,
@@ -324,7 +351,7 @@ impl ActionTerms {
     /// arm module.
     pub fn new(model: &RobotModel, bounds: &GoalBounds) -> Result<Self, TermError> {
         bounds.check()?;
-        Self::build(model, |module| {
+        Self::build(model, bounds.wheel_velocity_rad_s, |module| {
             Ok(Term::Arm(ArmGoalTerm::new(model, module, bounds)?))
         })
     }
@@ -339,7 +366,8 @@ impl ActionTerms {
                 value: scale,
             });
         }
-        Self::build(model, |module| {
+        check_wheel_velocity(bounds.wheel_velocity_rad_s)?;
+        Self::build(model, bounds.wheel_velocity_rad_s, |module| {
             Ok(Term::Joints(JointTargetTerm {
                 module: module.name.clone(),
                 role: module.role,
@@ -349,9 +377,11 @@ impl ActionTerms {
         })
     }
 
-    /// Every module's term: `arm` makes an arm module's, a wheel module gets a wheel term.
+    /// Every module's term: `arm` makes an arm module's, a wheel module gets a wheel term
+    /// scaled by its wheels' velocity limit, or by `wheel_bound_rad_s` where that is lower.
     fn build(
         model: &RobotModel,
+        wheel_bound_rad_s: Option<f64>,
         arm: impl Fn(&ModuleInstance) -> Result<Term, TermError>,
     ) -> Result<Self, TermError> {
         let mut terms = Vec::new();
@@ -366,7 +396,7 @@ impl ActionTerms {
                     .iter()
                     .filter(|a| a.mode == ActuatorMode::Velocity)
                     .map(|a| a.velocity_limit)
-                    .fold(f64::INFINITY, f64::min);
+                    .fold(wheel_bound_rad_s.unwrap_or(f64::INFINITY), f64::min);
                 terms.push(Term::Wheel(WheelTerm {
                     module: module.name.clone(),
                     scale_rad_s: limit,

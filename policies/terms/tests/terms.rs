@@ -15,6 +15,7 @@ const BOUNDS: GoalBounds = GoalBounds {
     manipulator_rotation_rad: 0.5,
     leg_position_m: 0.1,
     leg_roll_rad: 0.4,
+    wheel_velocity_rad_s: None,
 };
 
 #[test]
@@ -163,6 +164,7 @@ fn bounds_read_back_from_the_action_description() {
         manipulator_rotation_rad: 0.5,
         leg_position_m: 0.1,
         leg_roll_rad: 0.3,
+        wheel_velocity_rad_s: None,
     };
     for name in ["minimal", "dragon", "tricycle"] {
         let model = robot(name);
@@ -197,6 +199,7 @@ fn flat_terms_command_every_arm_joint_around_home_by_hand() {
         &model,
         &JointBounds {
             joint_scale_rad: 0.5,
+            wheel_velocity_rad_s: None,
         },
     )
     .unwrap();
@@ -244,7 +247,83 @@ fn flat_terms_command_every_arm_joint_around_home_by_hand() {
         assert!(ActionTerms::flat(
             &model,
             &JointBounds {
-                joint_scale_rad: bad
+                joint_scale_rad: bad,
+                wheel_velocity_rad_s: None,
+            }
+        )
+        .is_err());
+    }
+}
+
+#[test]
+fn a_wheel_bound_scales_wheel_velocities_below_the_wheels_limit_and_reads_back() {
+    // Tricycle's wheels turn at up to their limit; a policy's bound lowers the scale for an
+    // action of 1, never raises it, and the description carries it to a deployed node.
+    let model = robot("tricycle");
+    let limit = ActionTerms::new(&model, &BOUNDS)
+        .unwrap()
+        .wheels()
+        .next()
+        .unwrap()
+        .scale_rad_s;
+    let capped = GoalBounds {
+        wheel_velocity_rad_s: Some(2.5),
+        ..BOUNDS
+    };
+    assert!(limit > 2.5, "{limit}");
+    let terms = ActionTerms::new(&model, &capped).unwrap();
+    let mut action = vec![0.0_f32; terms.size()];
+    let at = terms.size() - 3;
+    action[at] = 0.5;
+    action[at + 1] = -4.0;
+    let wheels = terms.commands(&action).unwrap().wheel_velocities;
+    assert_eq!(wheels, [1.25, -2.5, 0.0]);
+    assert!(
+        terms
+            .describe()
+            .ends_with("wheel2:wheel:1:velocity_rad_s=2.5"),
+        "{}",
+        terms.describe()
+    );
+    let back = GoalBounds::from_description(&terms.describe()).unwrap();
+    assert_eq!(back.wheel_velocity_rad_s, Some(2.5));
+    assert_eq!(
+        ActionTerms::new(&model, &back).unwrap().describe(),
+        terms.describe()
+    );
+    // Above the wheels' own limit the limit holds.
+    let loose = GoalBounds {
+        wheel_velocity_rad_s: Some(limit * 10.0),
+        ..BOUNDS
+    };
+    let terms = ActionTerms::new(&model, &loose).unwrap();
+    assert!(terms.wheels().all(|w| w.scale_rad_s == limit));
+    // The flat baseline takes the same bound.
+    let flat = ActionTerms::flat(
+        &model,
+        &JointBounds {
+            joint_scale_rad: 0.5,
+            wheel_velocity_rad_s: Some(2.5),
+        },
+    )
+    .unwrap();
+    assert!(flat.wheels().all(|w| w.scale_rad_s == 2.5));
+    // A bound that is not a positive speed is refused by name.
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let err = ActionTerms::new(
+            &model,
+            &GoalBounds {
+                wheel_velocity_rad_s: Some(bad),
+                ..BOUNDS
+            },
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("wheel_velocity_rad_s"), "{err}");
+        assert!(ActionTerms::flat(
+            &model,
+            &JointBounds {
+                joint_scale_rad: 0.5,
+                wheel_velocity_rad_s: Some(bad),
             }
         )
         .is_err());

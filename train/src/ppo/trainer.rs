@@ -402,9 +402,7 @@ impl Learner {
                 count += 1.0;
             }
         }
-        if let Some(cap) = self.config.log_std_cap(env_steps) {
-            self.net.log_std.iter_mut().for_each(|l| *l = l.min(cap));
-        }
+        self.cap_log_std(env_steps);
         Loss {
             total: sum.total / count,
             policy: sum.policy / count,
@@ -412,6 +410,16 @@ impl Learner {
             entropy: sum.entropy / count,
             approx_kl: sum.approx_kl / count,
             clip_fraction: sum.clip_fraction / count,
+        }
+    }
+}
+
+impl Learner {
+    /// Lowers the policy's log standard deviations to the schedule's cap at `env_steps`
+    /// ([`PpoConfig::log_std_cap`]; nothing without a schedule).
+    fn cap_log_std(&mut self, env_steps: u64) {
+        if let Some(cap) = self.config.log_std_cap(env_steps) {
+            self.net.log_std.iter_mut().for_each(|l| *l = l.min(cap));
         }
     }
 }
@@ -696,6 +704,8 @@ impl<E: Environment> Trainer<E> {
         self.norm = progress.normalizer;
         self.learner.optimizer.learning_rate = progress.learning_rate;
         self.learner.optimizer.step = progress.adam_step;
+        // This run's noise schedule holds from its first rollout, not from its first update.
+        self.learner.cap_log_std(self.env_steps);
         Ok(())
     }
 }
