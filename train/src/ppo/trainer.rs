@@ -704,8 +704,6 @@ impl<E: Environment> Trainer<E> {
         self.norm = progress.normalizer;
         self.learner.optimizer.learning_rate = progress.learning_rate;
         self.learner.optimizer.step = progress.adam_step;
-        // This run's noise schedule holds from its first rollout, not from its first update.
-        self.learner.cap_log_std(self.env_steps);
         Ok(())
     }
 }
