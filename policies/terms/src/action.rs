@@ -5,14 +5,16 @@
 //! position and roll about its tool's x axis), a wheel module one velocity for both wheels, a
 //! passive body nothing. Every value is clipped to [-1, 1] (a non-finite one counts as 0) and
 //! scaled: goals are bounded offsets around the module's home tool pose, in the module's base
-//! frame (the frame the skill was trained in); a wheel's velocity is scaled by its limit.
+//! frame (the frame the skill was trained in); a wheel's velocity is scaled by its limit, or by
+//! the policy's wheel bound where that is lower.
 
 use kumi_model::{ActuatorMode, ModuleInstance, RobotModel, Role};
 use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::{Goal, JOINTS};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
-/// How far goals may move from each arm module's home tool pose (for an action of 1).
+/// How far goals may move from each arm module's home tool pose, and how fast the wheels may
+/// turn (for an action of 1): `[action]` of a whole-body training config.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct GoalBounds {
@@ -49,14 +51,17 @@ impl GoalBounds {
     }
 }
 
-/// A wheel velocity bound must be finite and positive.
+/// A wheel velocity bound, where set, must be a positive speed.
 fn check_wheel_velocity(bound: Option<f64>) -> Result<(), TermError> {
-    match bound {
-        Some(v) if !(v.is_finite() && v > 0.0) => Err(TermError::Bound {
-            name: "wheel_velocity_rad_s",
-            value: v,
-        }),
-        _ => Ok(()),
+    bound.map_or(Ok(()), |v| check_positive("wheel_velocity_rad_s", v))
+}
+
+/// A scale that must be finite and above 0.
+fn check_positive(name: &'static str, value: f64) -> Result<(), TermError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(TermError::NotPositive { name, value })
     }
 }
 
@@ -64,7 +69,8 @@ impl GoalBounds {
     /// The bounds a policy was trained with, read back from its action description
     /// ([`ActionTerms::describe`], the `kumi.action` metadata): a deployed node takes them from
     /// the policy file, not from a training config. Bounds of a role the robot lacks are 0; the
-    /// wheel bound is the largest wheel velocity described (none without wheels). The caller
+    /// wheel bound is the largest wheel velocity described (none without wheels; for a policy
+    /// trained without a bound, the wheels' own limit). The caller
     /// still checks the whole contract: terms built from these bounds must describe themselves
     /// exactly as the file does.
     pub fn from_description(description: &str) -> Result<Self, TermError> {
@@ -133,6 +139,8 @@ impl GoalBounds {
 pub enum TermError {
     #[error("goal bound `{name}` must be finite and >= 0, not {value}")]
     Bound { name: &'static str, value: f64 },
+    #[error("`{name}` must be finite and > 0, not {value}")]
+    NotPositive { name: &'static str, value: f64 },
     #[error("module `{module}`: {message}")]
     Module { module: String, message: String },
     #[error("the action has {found} values, the morphology's terms take {expected}")]
@@ -360,12 +368,7 @@ impl ActionTerms {
     /// a velocity per wheel module.
     pub fn flat(model: &RobotModel, bounds: &JointBounds) -> Result<Self, TermError> {
         let scale = bounds.joint_scale_rad;
-        if !(scale.is_finite() && scale > 0.0) {
-            return Err(TermError::Bound {
-                name: "joint_scale_rad",
-                value: scale,
-            });
-        }
+        check_positive("joint_scale_rad", scale)?;
         check_wheel_velocity(bounds.wheel_velocity_rad_s)?;
         Self::build(model, bounds.wheel_velocity_rad_s, |module| {
             Ok(Term::Joints(JointTargetTerm {

@@ -185,9 +185,24 @@ fn bounds_read_back_from_the_action_description() {
         "arm0:gripper:6:position_m=0.2:rotation_rad=0.5",
         "leg0:leg:4:position_m=0.1:roll_rad=0.5;leg1:leg:4:position_m=0.2:roll_rad=0.5",
         "arm0:manipulator:6:position_m=-1:rotation_rad=0.5",
+        "wheel0:wheel:1",
+        "wheel0:wheel:1:velocity_rad_s=x",
+        "wheel0:wheel:1:velocity_rad_s=0",
     ] {
         assert!(GoalBounds::from_description(bad).is_err(), "{bad}");
     }
+    // The wheel bound read back: the largest described, none without wheels, and for a policy
+    // trained without one the wheels' own limit.
+    let wheels = "w0:wheel:1:velocity_rad_s=2;w1:wheel:1:velocity_rad_s=5";
+    let back = GoalBounds::from_description(wheels).unwrap();
+    assert_eq!(back.wheel_velocity_rad_s, Some(5.0));
+    let arm_only = "arm0:manipulator:6:position_m=0.25:rotation_rad=0.5";
+    let back = GoalBounds::from_description(arm_only).unwrap();
+    assert_eq!(back.wheel_velocity_rad_s, None);
+    let tricycle = ActionTerms::new(&robot("tricycle"), &bounds).unwrap();
+    let limit = tricycle.wheels().next().unwrap().scale_rad_s;
+    let back = GoalBounds::from_description(&tricycle.describe()).unwrap();
+    assert_eq!(back.wheel_velocity_rad_s, Some(limit));
 }
 
 #[test]

@@ -320,6 +320,14 @@ fn gather(xs: &[f32], width: usize, indices: &[u32]) -> Vec<f32> {
 }
 
 impl Learner {
+    /// Lowers the policy's log standard deviations to the schedule's cap at `env_steps`
+    /// ([`PpoConfig::log_std_cap`]; nothing without a schedule).
+    fn cap_log_std(&mut self, env_steps: u64) {
+        if let Some(cap) = self.config.log_std_cap(env_steps) {
+            self.net.log_std.iter_mut().for_each(|l| *l = l.min(cap));
+        }
+    }
+
     /// Fresh networks for `obs_dim` observations and `act_dim` actions, initialised from the
     /// seed; the minibatch shuffling draws from its own stream of the same seed.
     pub fn new(
@@ -410,16 +418,6 @@ impl Learner {
             entropy: sum.entropy / count,
             approx_kl: sum.approx_kl / count,
             clip_fraction: sum.clip_fraction / count,
-        }
-    }
-}
-
-impl Learner {
-    /// Lowers the policy's log standard deviations to the schedule's cap at `env_steps`
-    /// ([`PpoConfig::log_std_cap`]; nothing without a schedule).
-    fn cap_log_std(&mut self, env_steps: u64) {
-        if let Some(cap) = self.config.log_std_cap(env_steps) {
-            self.net.log_std.iter_mut().for_each(|l| *l = l.min(cap));
         }
     }
 }
@@ -704,6 +702,9 @@ impl<E: Environment> Trainer<E> {
         self.norm = progress.normalizer;
         self.learner.optimizer.learning_rate = progress.learning_rate;
         self.learner.optimizer.step = progress.adam_step;
+        // The noise cap is not applied here: a resumed run's first rollout runs at the
+        // checkpoint's noise, and the cap holds from its first update. Applying it here would
+        // change what tricycle_settle.toml's documented second stage reproduces.
         Ok(())
     }
 }
