@@ -70,9 +70,9 @@ impl GoalBounds {
     /// ([`ActionTerms::describe`], the `kumi.action` metadata): a deployed node takes them from
     /// the policy file, not from a training config. Bounds of a role the robot lacks are 0; the
     /// wheel bound is the largest wheel velocity described (none without wheels; for a policy
-    /// trained without a bound, the wheels' own limit). The caller
-    /// still checks the whole contract: terms built from these bounds must describe themselves
-    /// exactly as the file does.
+    /// trained without a bound, the wheels' own limit). The caller still checks the whole
+    /// contract: terms built from these bounds must describe themselves exactly as the file
+    /// does.
     pub fn from_description(description: &str) -> Result<Self, TermError> {
         let bad = |why: String| TermError::Description(why);
         let mut bounds = GoalBounds {
@@ -293,6 +293,13 @@ pub struct JointBounds {
     pub wheel_velocity_rad_s: Option<f64>,
 }
 
+impl JointBounds {
+    fn check(&self) -> Result<(), TermError> {
+        check_positive("joint_scale_rad", self.joint_scale_rad)?;
+        check_wheel_velocity(self.wheel_velocity_rad_s)
+    }
+}
+
 /// One velocity for both wheels of a wheel module.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WheelTerm {
@@ -367,9 +374,8 @@ impl ActionTerms {
     /// The flat baseline's terms (SPEC section 6): every arm joint's position target directly,
     /// a velocity per wheel module.
     pub fn flat(model: &RobotModel, bounds: &JointBounds) -> Result<Self, TermError> {
+        bounds.check()?;
         let scale = bounds.joint_scale_rad;
-        check_positive("joint_scale_rad", scale)?;
-        check_wheel_velocity(bounds.wheel_velocity_rad_s)?;
         Self::build(model, bounds.wheel_velocity_rad_s, |module| {
             Ok(Term::Joints(JointTargetTerm {
                 module: module.name.clone(),
