@@ -656,6 +656,7 @@ mod tests {
                 terminations: 0,
                 action_noise: 0.0,
                 episodes,
+                action_names: Vec::new(),
             },
         }
     }

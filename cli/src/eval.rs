@@ -150,11 +150,15 @@ impl BodyEvaluations {
 
     /// Every step of the traced episodes of every engine, one CSV row each.
     pub fn trace_csv(&self) -> String {
-        let mut text = format!("engine,{}\n", TraceStep::CSV_HEADER);
+        let names = self
+            .evaluations
+            .first()
+            .map_or(&[][..], |r| &r.action_names[..]);
+        let mut text = format!("engine,{}\n", TraceStep::csv_header(names));
         for result in &self.evaluations {
             for (k, e) in result.episodes.iter().enumerate() {
                 for (step, s) in e.trace.iter().enumerate() {
-                    let row = s.csv_row(k, step, &e.target);
+                    let row = s.csv_row(k, step, &e.target, names.len());
                     text.push_str(&format!("{},{row}\n", result.engine));
                 }
             }

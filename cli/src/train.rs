@@ -651,18 +651,19 @@ mod tests {
         assert!(err.to_string().contains("no shipped penalty"), "{err}");
     }
 
-    /// The bound on the wheels' velocity a config's policy may command [rad/s].
-    fn wheel_bound(config: &TrainBodyConfig) -> Option<f64> {
+    /// The bounds on the wheels a config's policy may command: velocity [rad/s] and
+    /// acceleration [rad/s^2].
+    fn wheel_bound(config: &TrainBodyConfig) -> (Option<f64>, Option<f64>) {
         match config.arms().unwrap() {
-            ArmControl::Skill(bounds) => bounds.wheel_velocity_rad_s,
-            ArmControl::Joints(bounds) => bounds.wheel_velocity_rad_s,
+            ArmControl::Skill(b) => (b.wheel_velocity_rad_s, b.wheel_acceleration_rad_s2),
+            ArmControl::Joints(b) => (b.wheel_velocity_rad_s, b.wheel_acceleration_rad_s2),
         }
     }
 
     #[test]
     fn a_robots_variants_share_task_and_reward_and_its_targets_are_within_reach() {
         // The baselines are compared with the hierarchical policy on the same task, reward
-        // (Table IV's terms; the penalty baseline adds its own on top) and wheel speed; and the
+        // (Table IV's terms; the penalty baseline adds its own on top) and wheel bounds; and the
         // target heights must lie around the manipulator's tool standing at home, where its
         // goal box (+-manipulator_position_m) can bring it. Tricycle's tool stands 0.9 m higher
         // than Minimal's; its first configs kept Minimal's heights, and no hierarchical policy
@@ -677,7 +678,7 @@ mod tests {
                     assert_eq!(
                         wheel_bound(&config),
                         wheel_bound(&hierarchical),
-                        "{robot} {variant}: the wheels' velocity bound"
+                        "{robot} {variant}: the wheels' velocity and acceleration bounds"
                     );
                 }
             }

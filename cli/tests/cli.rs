@@ -303,6 +303,19 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         (end - rows[1][4].parse::<f64>().unwrap()).abs() < 1e-3,
         "{trace}"
     );
+    // The base's tilt and the action that led to each step: Minimal's 7 values, by name,
+    // empty at the start.
+    let header: Vec<&str> = lines[0].split(',').collect();
+    assert_eq!(header[16], "tilt_rad");
+    assert_eq!(header.len(), 17 + 7, "{}", lines[0]);
+    assert!(header[17..].iter().all(|h| h.starts_with("action:")));
+    assert!(header.contains(&"action:wheel0/velocity"), "{}", lines[0]);
+    let cells = |line: &str| -> Vec<String> { line.split(',').map(String::from).collect() };
+    assert!(lines[1..].iter().all(|l| cells(l).len() == header.len()));
+    assert!(cells(lines[1])[17..].iter().all(String::is_empty));
+    assert!(cells(lines[2])[16..]
+        .iter()
+        .all(|c| c.parse::<f64>().is_ok_and(f64::is_finite)));
     assert_eq!(v["robot"], "minimal");
     for key in ["position_error_m", "yaw_error_rad", "contacts_per_episode"] {
         assert!(

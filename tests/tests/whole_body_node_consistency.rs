@@ -28,6 +28,7 @@ const BOUNDS: GoalBounds = GoalBounds {
     leg_position_m: 0.1,
     leg_roll_rad: 0.5,
     wheel_velocity_rad_s: None,
+    wheel_acceleration_rad_s2: None,
 };
 
 fn env(model: Arc<RobotModel>, engine: Engine) -> WholeBody {

@@ -41,6 +41,9 @@ pub struct BodyEvaluation {
     /// Every episode's outcome, in seed order (for plots; not printed).
     #[serde(skip)]
     pub episodes: Vec<Episode>,
+    /// The action values' names, for the trace's columns (not printed).
+    #[serde(skip)]
+    pub action_names: Vec<String>,
 }
 
 impl BodyEvaluation {
@@ -165,7 +168,7 @@ pub fn leg_orientation(model: &RobotModel, world: &dyn SimWorld) -> f64 {
 }
 
 /// One control step of a traced episode (world frame).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TraceStep {
     /// Base position [m] and heading [rad] (of its x axis).
     pub base: [f64; 3],
@@ -173,13 +176,25 @@ pub struct TraceStep {
     pub tool: [f64; 4],
     /// Tool position error [m] and absolute yaw error [rad].
     pub errors: [f64; 2],
+    /// Base tilt [rad]: the angle between its z axis and the world's.
+    pub tilt_rad: f64,
+    /// The action that led here, as the policy output it (with any evaluation noise, before
+    /// the terms clip it); empty at the episode's start.
+    pub action: Vec<f32>,
 }
 
 impl TraceStep {
-    /// The header of [`TraceStep::csv_row`].
-    pub const CSV_HEADER: &'static str = "episode,step,base_x_m,base_y_m,base_yaw_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,target_x_m,target_y_m,target_z_m,target_yaw_rad,position_error_m,yaw_error_rad";
+    /// The header of [`TraceStep::csv_row`] for actions of these value names
+    /// ([`kumi_terms::ActionTerms::names`]).
+    pub fn csv_header(action_names: &[String]) -> String {
+        let actions: String = action_names
+            .iter()
+            .map(|n| format!(",action:{n}"))
+            .collect();
+        format!("episode,step,base_x_m,base_y_m,base_yaw_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,target_x_m,target_y_m,target_z_m,target_yaw_rad,position_error_m,yaw_error_rad,tilt_rad{actions}")
+    }
 
-    fn of(env: &WholeBody) -> Self {
+    fn of(env: &WholeBody, action: &[f32]) -> Self {
         let (base, tool) = (env.world().base_pose(), env.tool_pose_w());
         let (b, t) = (base.translation.vector, tool.translation.vector);
         let (position, yaw) = env.errors();
@@ -187,22 +202,29 @@ impl TraceStep {
             base: [b.x, b.y, tool_yaw(&base.rotation)],
             tool: [t.x, t.y, t.z, tool_yaw(&tool.rotation)],
             errors: [position, yaw],
+            tilt_rad: env.world().base_tilt(),
+            action: action.to_vec(),
         }
     }
 
-    /// One CSV row: episode `k`, step `step`, to `target`.
-    pub fn csv_row(&self, k: usize, step: usize, target: &Target) -> String {
+    /// One CSV row: episode `k`, step `step`, to `target`; `width` action columns (empty at
+    /// the start).
+    pub fn csv_row(&self, k: usize, step: usize, target: &Target, width: usize) -> String {
         let p = target.position_w;
-        let values = self
+        let mut values = self
             .base
             .iter()
             .chain(&self.tool)
             .chain(&[p.x, p.y, p.z, target.yaw])
             .chain(&self.errors)
+            .chain(&[self.tilt_rad])
             .map(|v| format!("{v:.4}"))
-            .collect::<Vec<_>>()
-            .join(",");
-        format!("{k},{step},{values}")
+            .collect::<Vec<_>>();
+        values.extend((0..width).map(|i| match self.action.get(i) {
+            Some(a) => format!("{a:.4}"),
+            None => String::new(),
+        }));
+        format!("{k},{step},{}", values.join(","))
     }
 }
 
@@ -332,14 +354,14 @@ where
                 let (mut contacts, mut closest, mut steps) = (0, start_position, 0);
                 let mut trace = Vec::new();
                 if k < traced {
-                    trace.push(TraceStep::of(env));
+                    trace.push(TraceStep::of(env, &[]));
                 }
                 loop {
                     let mut action = policy(&obs).map_err(EvalError::Policy)?;
                     noise.add(&mut action);
                     let out = env.step(&action);
                     if k < traced {
-                        trace.push(TraceStep::of(env));
+                        trace.push(TraceStep::of(env, &action));
                     }
                     contacts += usize::from(rule.any(env.world()));
                     closest = closest.min(out.position_error);
@@ -383,5 +405,9 @@ where
         terminations: episodes.len() - finished.len(),
         action_noise,
         episodes,
+        action_names: config
+            .arms
+            .terms(&model)
+            .map_or_else(|_| Vec::new(), |terms| terms.names()),
     })
 }

@@ -17,7 +17,7 @@ use kumi_model::{ActuatorMode, RobotModel, Role};
 use kumi_policies::observation::{self as skill_obs, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy};
-use kumi_terms::action::{ActionTerms, GoalBounds, JointBounds};
+use kumi_terms::action::{ActionTerms, GoalBounds, JointBounds, WheelRamp};
 use kumi_terms::observation::{self as body_obs, BodyState, Target, ToolChain};
 use kumi_worlds::{home_joint_positions, Engine, SimConfig, SimWorld};
 use nalgebra::{Isometry3, Vector3};
@@ -137,6 +137,8 @@ pub struct WholeBody {
     rng: ChaCha8Rng,
     target: Target,
     previous_action: Vec<f32>,
+    /// The wheel commands' rate limit (the policy's wheel acceleration).
+    wheel_ramp: WheelRamp,
     step: usize,
 }
 
@@ -196,6 +198,7 @@ impl WholeBody {
         let episode_steps = (config.task.episode_s * sim.control_hz).round() as usize;
         let mut env = Self {
             previous_action: vec![0.0; terms.size()],
+            wheel_ramp: WheelRamp::new(&terms, sim.control_hz),
             world,
             terms,
             arms,
@@ -289,6 +292,7 @@ impl WholeBody {
             yaw: self.uniform(-PI, PI),
         };
         self.previous_action.iter_mut().for_each(|a| *a = 0.0);
+        self.wheel_ramp.stop();
         self.step = 0;
         self.observation()
     }
@@ -383,7 +387,8 @@ impl WholeBody {
                     .expect("targets are finite and sized for the module");
             }
         }
-        for (module, v) in self.wheel_modules.iter().zip(&commands.wheel_velocities) {
+        let wheel_velocities = self.wheel_ramp.follow(&commands.wheel_velocities);
+        for (module, v) in self.wheel_modules.iter().zip(&wheel_velocities) {
             self.world
                 .set_wheel_velocity(module, *v)
                 .expect("a wheel module");

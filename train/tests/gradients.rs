@@ -18,6 +18,7 @@ const COEFFICIENTS: LossCoefficients = LossCoefficients {
     clip: 0.2,
     value: 0.5,
     entropy: 0.01,
+    bound: 0.3,
 };
 
 struct Data {
@@ -52,6 +53,9 @@ fn fixture() -> (ActorCritic<f64>, Data) {
         .params
         .iter_mut()
         .for_each(|p| *p = rng.random_range(-0.6..0.6));
+    // Output biases that put many means past the clip range of +-1, where the bound loss acts.
+    let biases = net.actor.params.len() - ACT;
+    net.actor.params[biases..].copy_from_slice(&[1.0, -1.1, 0.2]);
     net.log_std = vec![-0.4, 0.1, -0.7];
     let mut r = |lo: f64, hi: f64, n: usize| -> Vec<f64> {
         (0..n).map(|_| rng.random_range(lo..hi)).collect()
@@ -89,6 +93,14 @@ fn parameters_mut(net: &mut ActorCritic<f64>) -> Vec<&mut f64> {
 #[test]
 fn gradients_match_finite_differences_to_1e_5() {
     let (net, data) = fixture();
+    // Some means lie past the clip range, so the bound loss is part of what is checked.
+    let means = net.mean(&data.observations);
+    let past = means.iter().filter(|m| m.abs() > 1.0).count();
+    assert!(
+        past > means.len() / 20 && past < means.len(),
+        "{past} of {} means past +-1",
+        means.len()
+    );
     let (_, gradient) = net.loss_and_gradient(&data.batch(), &COEFFICIENTS);
     let analytic = flat(&gradient);
     let h = 1e-6;
@@ -161,9 +173,13 @@ fn candle_loss(
     let entropy = ls
         .sum_all()?
         .affine(1.0, ACT as f64 * (0.5 + half_ln_2pi))?;
+    let over = mean.affine(1.0, -1.0)?.relu()?;
+    let under = mean.affine(-1.0, -1.0)?.relu()?;
+    let bound = (over.sqr()? + under.sqr()?)?.sum(D::Minus1)?.mean_all()?;
     policy
         .add(&(value * c.value)?)?
-        .sub(&(entropy * c.entropy)?)
+        .sub(&(entropy * c.entropy)?)?
+        .add(&(bound * c.bound)?)
 }
 
 /// Candle variables holding a network's parameters, layer by layer.

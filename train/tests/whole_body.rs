@@ -51,6 +51,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             leg_position_m: 0.1,
             leg_roll_rad: 0.5,
             wheel_velocity_rad_s: None,
+            wheel_acceleration_rad_s2: None,
         }),
     }
 }
@@ -153,6 +154,7 @@ fn the_flat_baseline_is_the_same_environment_with_joint_targets_and_the_arms_sta
         arms: ArmControl::Joints(JointBounds {
             joint_scale_rad: 0.5,
             wheel_velocity_rad_s: None,
+            wheel_acceleration_rad_s2: None,
         }),
         ..engine_config
     };
@@ -470,5 +472,39 @@ fn the_observed_tool_pose_is_the_worlds_while_the_robot_moves() {
         }
         println!("{name}: observed tool at most {worst:.2e} m from the world's");
         assert!(worst < 1e-3, "{name}: {worst} m");
+    }
+}
+
+#[test]
+fn a_wheel_acceleration_ramps_the_commanded_wheel_velocities_from_each_episodes_start() {
+    // 3 rad/s^2 at 30 Hz: the wheels are commanded 0.1 rad/s more each control step toward
+    // the policy's full speed, and a new episode starts them again from 0.
+    let mut config = config(1.5);
+    if let ArmControl::Skill(bounds) = &mut config.arms {
+        bounds.wheel_acceleration_rad_s2 = Some(3.0);
+    }
+    let mut env = WholeBody::new(model("tricycle"), config, &skill(), 3).unwrap();
+    let wheel_commands = |env: &WholeBody| -> Vec<f64> {
+        let world = env.world();
+        let modes = world.servos().actuators().iter().map(|a| a.mode);
+        modes
+            .zip(world.commands())
+            .filter(|(mode, _)| *mode == kumi_model::ActuatorMode::Velocity)
+            .map(|(_, c)| c.abs())
+            .collect()
+    };
+    let full = vec![1.0_f32; env.terms().size()];
+    for episode in 0..2 {
+        env.reset();
+        for step in 1..=3 {
+            env.step(&full);
+            let want = 0.1 * f64::from(step);
+            let commands = wheel_commands(&env);
+            assert_eq!(commands.len(), 6);
+            assert!(
+                commands.iter().all(|c| (c - want).abs() < 1e-9),
+                "episode {episode}, step {step}: {commands:?}"
+            );
+        }
     }
 }

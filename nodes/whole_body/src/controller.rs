@@ -18,7 +18,7 @@ use kumi_model::RobotModel;
 use kumi_policies::observation::Goal;
 use kumi_terms::observation::{self, BodyState};
 use kumi_terms::termination;
-use kumi_terms::{ActionTerms, Target, ToolChain};
+use kumi_terms::{ActionTerms, Target, ToolChain, WheelRamp};
 use nalgebra::Isometry3;
 
 use crate::tick::Snapshot;
@@ -77,6 +77,8 @@ pub struct WholeBodyController {
     policy: PolicyFn,
     target: Option<Target>,
     previous_action: Vec<f32>,
+    /// The wheel commands' rate limit, as in training.
+    wheel_ramp: WheelRamp,
     last_goals: Option<Vec<(String, Goal)>>,
     /// Tilt [rad] past which the controller stops (none: it never does).
     tilt_limit_rad: Option<f64>,
@@ -104,6 +106,7 @@ impl WholeBodyController {
         }
         Ok(Self {
             previous_action: vec![0.0; terms.size()],
+            wheel_ramp: WheelRamp::new(&terms, kumi_model::commands::CONTROL_HZ),
             terms,
             tool,
             joints,
@@ -232,7 +235,7 @@ impl WholeBodyController {
                 .terms
                 .wheels()
                 .map(|w| w.module.clone())
-                .zip(commands.wheel_velocities)
+                .zip(self.wheel_ramp.follow(&commands.wheel_velocities))
                 .collect(),
             hold: None,
             tool_pose_w: Some(tool_pose_w),
@@ -242,11 +245,13 @@ impl WholeBodyController {
         }
     }
 
-    /// Holds: wheels stop, arms keep their last goals, the previous action starts over. Before
+    /// Holds: wheels stop (at once: a ramp's rate limit does not slow a hold), arms keep their
+    /// last goals, the previous action starts over. Before
     /// the first target nothing is commanded at all: the bridge holds what it was never told
     /// to move, and in lockstep simulated time stands still until there is a target.
     pub fn hold(&mut self, why: Hold, tool_pose_w: Option<Isometry3<f64>>) -> Decision {
         self.previous_action.iter_mut().for_each(|a| *a = 0.0);
+        self.wheel_ramp.stop();
         let commanded = self.last_goals.is_some();
         Decision {
             goals: self.last_goals.clone(),
@@ -278,6 +283,12 @@ mod tests {
 
     /// Tricycle's controller over a policy that always answers zeros.
     fn tricycle() -> WholeBodyController {
+        tricycle_with(None, 0.0)
+    }
+
+    /// Tricycle's controller, its wheels ramped at `acceleration_rad_s2`, over a policy that
+    /// always answers `answer` for every value.
+    fn tricycle_with(acceleration_rad_s2: Option<f64>, answer: f32) -> WholeBodyController {
         let library = ModuleLibrary::shipped();
         let model = assemble(&load_morphology("tricycle", &library).unwrap(), &library);
         let bounds = GoalBounds {
@@ -286,10 +297,11 @@ mod tests {
             leg_position_m: 0.05,
             leg_roll_rad: 1.5,
             wheel_velocity_rad_s: None,
+            wheel_acceleration_rad_s2: acceleration_rad_s2,
         };
         let terms = ActionTerms::new(&model, &bounds).unwrap();
         let size = terms.size();
-        let policy: PolicyFn = Box::new(move |_| Ok(vec![0.0; size]));
+        let policy: PolicyFn = Box::new(move |_| Ok(vec![answer; size]));
         WholeBodyController::new(&model, terms, policy).unwrap()
     }
 
@@ -362,5 +374,33 @@ mod tests {
         free.set_target(target(1.0));
         assert!(free.step(&state(&free, 1.5)).action.is_some());
         assert_eq!(free.tilt_limit_rad(), None);
+    }
+
+    #[test]
+    fn ramped_wheels_speed_up_at_the_policys_acceleration_and_stop_at_once_on_a_hold() {
+        // 3 rad/s^2 at 30 Hz: 0.1 rad/s more per control step toward full speed, as in training.
+        let mut c = tricycle_with(Some(3.0), 1.0).with_tilt_limit(0.785);
+        c.set_target(target(1.0));
+        let speeds =
+            |d: &Decision| -> Vec<f64> { d.wheel_velocities.iter().map(|w| w.1).collect() };
+        for step in 1..=3 {
+            let d = c.step(&state(&c, 0.0));
+            let want = 0.1 * step as f64;
+            assert!(speeds(&d).iter().all(|v| (v - want).abs() < 1e-9), "{d:?}");
+        }
+        // A hold stops the wheels at once; after it the ramp starts again from 0.
+        let held = c.step(&state(&c, 1.0));
+        assert!(speeds(&held).iter().all(|v| *v == 0.0));
+        c.set_target(target(2.0));
+        let again = c.step(&state(&c, 0.0));
+        assert!(
+            speeds(&again).iter().all(|v| (v - 0.1).abs() < 1e-9),
+            "{again:?}"
+        );
+        // Unramped, the policy's velocity is commanded at once.
+        let mut free = tricycle_with(None, 1.0);
+        free.set_target(target(1.0));
+        let d = free.step(&state(&free, 0.0));
+        assert!(speeds(&d).iter().all(|v| *v == 5.0), "{d:?}");
     }
 }

@@ -6,7 +6,9 @@
 //! passive body nothing. Every value is clipped to [-1, 1] (a non-finite one counts as 0) and
 //! scaled: goals are bounded offsets around the module's home tool pose, in the module's base
 //! frame (the frame the skill was trained in); a wheel's velocity is scaled by its limit, or by
-//! the policy's wheel bound where that is lower.
+//! the policy's wheel bound where that is lower. Where the policy sets a wheel acceleration,
+//! the wheel commands follow the policy's through a [`WheelRamp`] (a rate limit whose state the
+//! caller keeps, as it keeps the previous action).
 
 use kumi_model::{ActuatorMode, ModuleInstance, RobotModel, Role};
 use kumi_policies::kinematics::ToolKinematics;
@@ -31,6 +33,10 @@ pub struct GoalBounds {
     /// above a wheel module's own limit, that limit.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wheel_velocity_rad_s: Option<f64>,
+    /// Largest change of a wheel's commanded velocity [rad/s^2]: the command ramps toward the
+    /// policy's at this rate ([`WheelRamp`]); absent, it follows the policy at once.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheel_acceleration_rad_s2: Option<f64>,
 }
 
 impl GoalBounds {
@@ -46,14 +52,33 @@ impl GoalBounds {
                 name,
                 value: *value,
             }),
-            None => check_wheel_velocity(self.wheel_velocity_rad_s),
+            None => check_wheel(self.wheel_velocity_rad_s, self.wheel_acceleration_rad_s2),
+        }
+    }
+
+    /// The wheel terms' bounds.
+    fn wheel(&self) -> WheelBounds {
+        WheelBounds {
+            velocity_rad_s: self.wheel_velocity_rad_s,
+            acceleration_rad_s2: self.wheel_acceleration_rad_s2,
         }
     }
 }
 
-/// A wheel velocity bound, where set, must be a positive speed.
-fn check_wheel_velocity(bound: Option<f64>) -> Result<(), TermError> {
-    bound.map_or(Ok(()), |v| check_positive("wheel_velocity_rad_s", v))
+/// The wheel bounds, where set, must be positive.
+fn check_wheel(
+    velocity_rad_s: Option<f64>,
+    acceleration_rad_s2: Option<f64>,
+) -> Result<(), TermError> {
+    velocity_rad_s.map_or(Ok(()), |v| check_positive("wheel_velocity_rad_s", v))?;
+    acceleration_rad_s2.map_or(Ok(()), |a| check_positive("wheel_acceleration_rad_s2", a))
+}
+
+/// What bounds every wheel term of a policy (unset: the module's own limit, no ramp).
+#[derive(Debug, Clone, Copy)]
+struct WheelBounds {
+    velocity_rad_s: Option<f64>,
+    acceleration_rad_s2: Option<f64>,
 }
 
 /// A scale that must be finite and above 0.
@@ -70,7 +95,8 @@ impl GoalBounds {
     /// ([`ActionTerms::describe`], the `kumi.action` metadata): a deployed node takes them from
     /// the policy file, not from a training config. Bounds of a role the robot lacks are 0; the
     /// wheel bound is the largest wheel velocity described (none without wheels; for a policy
-    /// trained without a bound, the wheels' own limit). The caller still checks the whole
+    /// trained without a bound, the wheels' own limit), and so is its acceleration (none
+    /// where no wheel entry names one). The caller still checks the whole
     /// contract: terms built from these bounds must describe themselves exactly as the file
     /// does.
     pub fn from_description(description: &str) -> Result<Self, TermError> {
@@ -81,6 +107,7 @@ impl GoalBounds {
             leg_position_m: 0.0,
             leg_roll_rad: 0.0,
             wheel_velocity_rad_s: None,
+            wheel_acceleration_rad_s2: None,
         };
         let mut seen: Vec<(&str, f64, f64)> = Vec::new();
         for entry in description.split(';').filter(|e| !e.is_empty()) {
@@ -102,12 +129,14 @@ impl GoalBounds {
                     .ok_or_else(|| bad(format!("`{entry}`: no number `{key}=` in field {i}")))
             };
             if role == "wheel" {
+                let largest = |old: Option<f64>, new: f64| Some(old.map_or(new, |v| v.max(new)));
                 let velocity = value(3, "velocity_rad_s")?;
-                bounds.wheel_velocity_rad_s = Some(
-                    bounds
-                        .wheel_velocity_rad_s
-                        .map_or(velocity, |v| v.max(velocity)),
-                );
+                bounds.wheel_velocity_rad_s = largest(bounds.wheel_velocity_rad_s, velocity);
+                if fields.len() > 4 {
+                    let acceleration = value(4, "acceleration_rad_s2")?;
+                    bounds.wheel_acceleration_rad_s2 =
+                        largest(bounds.wheel_acceleration_rad_s2, acceleration);
+                }
                 continue;
             }
             let position = value(3, "position_m")?;
@@ -291,12 +320,22 @@ pub struct JointBounds {
     /// As [`GoalBounds::wheel_velocity_rad_s`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wheel_velocity_rad_s: Option<f64>,
+    /// As [`GoalBounds::wheel_acceleration_rad_s2`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheel_acceleration_rad_s2: Option<f64>,
 }
 
 impl JointBounds {
     fn check(&self) -> Result<(), TermError> {
         check_positive("joint_scale_rad", self.joint_scale_rad)?;
-        check_wheel_velocity(self.wheel_velocity_rad_s)
+        check_wheel(self.wheel_velocity_rad_s, self.wheel_acceleration_rad_s2)
+    }
+
+    fn wheel(&self) -> WheelBounds {
+        WheelBounds {
+            velocity_rad_s: self.wheel_velocity_rad_s,
+            acceleration_rad_s2: self.wheel_acceleration_rad_s2,
+        }
     }
 }
 
@@ -309,6 +348,8 @@ pub struct WheelTerm {
     pub scale_rad_s: f64,
     /// Wheels of the module (velocity joints).
     pub wheels: usize,
+    /// Largest change of the commanded velocity [rad/s^2] ([`WheelRamp`]); none: no ramp.
+    pub acceleration_rad_s2: Option<f64>,
 }
 
 impl WheelTerm {
@@ -366,7 +407,7 @@ impl ActionTerms {
     /// arm module.
     pub fn new(model: &RobotModel, bounds: &GoalBounds) -> Result<Self, TermError> {
         bounds.check()?;
-        Self::build(model, bounds.wheel_velocity_rad_s, |module| {
+        Self::build(model, bounds.wheel(), |module| {
             Ok(Term::Arm(ArmGoalTerm::new(model, module, bounds)?))
         })
     }
@@ -376,7 +417,7 @@ impl ActionTerms {
     pub fn flat(model: &RobotModel, bounds: &JointBounds) -> Result<Self, TermError> {
         bounds.check()?;
         let scale = bounds.joint_scale_rad;
-        Self::build(model, bounds.wheel_velocity_rad_s, |module| {
+        Self::build(model, bounds.wheel(), |module| {
             Ok(Term::Joints(JointTargetTerm {
                 module: module.name.clone(),
                 role: module.role,
@@ -387,10 +428,11 @@ impl ActionTerms {
     }
 
     /// Every module's term: `arm` makes an arm module's, a wheel module gets a wheel term
-    /// scaled by its wheels' velocity limit, or by `wheel_bound_rad_s` where that is lower.
+    /// scaled by its wheels' velocity limit, or by the wheel bound where that is lower, and
+    /// ramped at the wheel acceleration where one is set.
     fn build(
         model: &RobotModel,
-        wheel_bound_rad_s: Option<f64>,
+        wheel: WheelBounds,
         arm: impl Fn(&ModuleInstance) -> Result<Term, TermError>,
     ) -> Result<Self, TermError> {
         let mut terms = Vec::new();
@@ -405,11 +447,12 @@ impl ActionTerms {
                     .iter()
                     .filter(|a| a.mode == ActuatorMode::Velocity)
                     .map(|a| a.velocity_limit)
-                    .fold(wheel_bound_rad_s.unwrap_or(f64::INFINITY), f64::min);
+                    .fold(wheel.velocity_rad_s.unwrap_or(f64::INFINITY), f64::min);
                 terms.push(Term::Wheel(WheelTerm {
                     module: module.name.clone(),
                     scale_rad_s: limit,
                     wheels,
+                    acceleration_rad_s2: wheel.acceleration_rad_s2,
                 }));
             } else if positions + wheels > 0 {
                 return Err(TermError::Module {
@@ -501,7 +544,8 @@ impl ActionTerms {
     }
 
     /// The terms in one line, for a policy's metadata: per module its name, role, width and
-    /// scales (`arm0:manipulator:6:position_m=0.25:rotation_rad=0.5;wheel0:wheel:1:velocity_rad_s=8`).
+    /// scales (`arm0:manipulator:6:position_m=0.25:rotation_rad=0.5;wheel0:wheel:1:velocity_rad_s=8`;
+    /// a ramped wheel adds `:acceleration_rad_s2=4`).
     pub fn describe(&self) -> String {
         self.terms
             .iter()
@@ -524,10 +568,70 @@ impl ActionTerms {
                     t.module, t.role, JOINTS, t.scale_rad
                 ),
                 Term::Wheel(t) => {
-                    format!("{}:wheel:1:velocity_rad_s={}", t.module, t.scale_rad_s)
+                    let ramp = t
+                        .acceleration_rad_s2
+                        .map_or(String::new(), |a| format!(":acceleration_rad_s2={a}"));
+                    format!(
+                        "{}:wheel:1:velocity_rad_s={}{ramp}",
+                        t.module, t.scale_rad_s
+                    )
                 }
             })
             .collect::<Vec<_>>()
             .join(";")
+    }
+}
+
+/// The wheel commands' rate limit: each wheel module's commanded velocity moves toward the
+/// policy's by at most its term's acceleration times the control period per step. Training,
+/// evaluation and the whole-body node keep one each, so a policy drives its wheels as it
+/// learnt to. Wheels without an acceleration follow the policy at once.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WheelRamp {
+    /// Per wheel module: the largest change per control step [rad/s] (none: no ramp).
+    max_step_rad_s: Vec<Option<f64>>,
+    /// Per wheel module: the velocity commanded last [rad/s].
+    commanded_rad_s: Vec<f64>,
+}
+
+impl WheelRamp {
+    /// The ramp for `terms`' wheel modules at `control_hz`, starting from stopped wheels.
+    pub fn new(terms: &ActionTerms, control_hz: f64) -> Self {
+        let max_step_rad_s: Vec<Option<f64>> = terms
+            .wheels()
+            .map(|w| w.acceleration_rad_s2.map(|a| a / control_hz))
+            .collect();
+        Self {
+            commanded_rad_s: vec![0.0; max_step_rad_s.len()],
+            max_step_rad_s,
+        }
+    }
+
+    /// The velocities [rad/s] to command now for the policy's `wanted_rad_s` (one per wheel
+    /// module, in the order of [`ActionTerms::wheels`]), remembered for the next step.
+    pub fn follow(&mut self, wanted_rad_s: &[f64]) -> Vec<f64> {
+        for ((now, wanted), step) in self
+            .commanded_rad_s
+            .iter_mut()
+            .zip(wanted_rad_s)
+            .zip(&self.max_step_rad_s)
+        {
+            *now = ramp(*now, *wanted, *step);
+        }
+        self.commanded_rad_s.clone()
+    }
+
+    /// The wheels were stopped (a new episode, a hold): the ramp starts again from 0.
+    pub fn stop(&mut self) {
+        self.commanded_rad_s.iter_mut().for_each(|v| *v = 0.0);
+    }
+}
+
+/// One step of a rate limit: `wanted`, or as close to it as `max_step` from `now` allows (no
+/// limit: exactly `wanted`).
+pub fn ramp(now: f64, wanted: f64, max_step: Option<f64>) -> f64 {
+    match max_step {
+        Some(step) if (wanted - now).abs() > step => now + step.copysign(wanted - now),
+        _ => wanted,
     }
 }

@@ -16,6 +16,7 @@ pub mod observation;
 pub mod termination;
 
 pub use action::{
-    ActionTerms, ArmGoalTerm, GoalBounds, JointBounds, JointTargetTerm, TermError, WheelTerm,
+    ActionTerms, ArmGoalTerm, GoalBounds, JointBounds, JointTargetTerm, TermError, WheelRamp,
+    WheelTerm,
 };
 pub use observation::{BodyState, ObservationSlot, Target, ToolChain};

@@ -2,7 +2,7 @@
 
 use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel, Role};
 use kumi_policies::rotation::orientation_error;
-use kumi_terms::action::{ActionTerms, GoalBounds, JointBounds, Term};
+use kumi_terms::action::{ActionTerms, GoalBounds, JointBounds, Term, WheelRamp};
 use kumi_terms::contract::{self, ContractMismatch};
 
 fn robot(name: &str) -> RobotModel {
@@ -16,6 +16,7 @@ const BOUNDS: GoalBounds = GoalBounds {
     leg_position_m: 0.1,
     leg_roll_rad: 0.4,
     wheel_velocity_rad_s: None,
+    wheel_acceleration_rad_s2: None,
 };
 
 #[test]
@@ -165,6 +166,7 @@ fn bounds_read_back_from_the_action_description() {
         leg_position_m: 0.1,
         leg_roll_rad: 0.3,
         wheel_velocity_rad_s: None,
+        wheel_acceleration_rad_s2: None,
     };
     for name in ["minimal", "dragon", "tricycle"] {
         let model = robot(name);
@@ -215,6 +217,7 @@ fn flat_terms_command_every_arm_joint_around_home_by_hand() {
         &JointBounds {
             joint_scale_rad: 0.5,
             wheel_velocity_rad_s: None,
+            wheel_acceleration_rad_s2: None,
         },
     )
     .unwrap();
@@ -264,6 +267,7 @@ fn flat_terms_command_every_arm_joint_around_home_by_hand() {
             &JointBounds {
                 joint_scale_rad: bad,
                 wheel_velocity_rad_s: None,
+                wheel_acceleration_rad_s2: None,
             }
         )
         .is_err());
@@ -319,6 +323,7 @@ fn a_wheel_bound_scales_wheel_velocities_below_the_wheels_limit_and_reads_back()
         &JointBounds {
             joint_scale_rad: 0.5,
             wheel_velocity_rad_s: Some(2.5),
+            wheel_acceleration_rad_s2: None,
         },
     )
     .unwrap();
@@ -339,8 +344,106 @@ fn a_wheel_bound_scales_wheel_velocities_below_the_wheels_limit_and_reads_back()
             &JointBounds {
                 joint_scale_rad: 0.5,
                 wheel_velocity_rad_s: Some(bad),
+                wheel_acceleration_rad_s2: None,
             }
         )
         .is_err());
+    }
+}
+
+#[test]
+fn a_ramp_moves_toward_the_wanted_velocity_by_at_most_its_step() {
+    use kumi_terms::action::ramp;
+    // By hand: 0.1 rad/s per step from 0 toward 0.35 takes 0.1, 0.2, 0.3, then 0.35 exactly.
+    let mut now = 0.0;
+    let mut seen = Vec::new();
+    for _ in 0..4 {
+        now = ramp(now, 0.35, Some(0.1));
+        seen.push(now);
+    }
+    assert_eq!(seen, [0.1, 0.2, 0.30000000000000004, 0.35]);
+    assert_eq!(ramp(1.0, -1.0, Some(0.5)), 0.5);
+    assert_eq!(ramp(0.2, 0.25, Some(0.5)), 0.25);
+    // No limit: the wanted value itself, bit for bit (an unramped policy's commands do not
+    // change).
+    assert_eq!(ramp(0.1, 0.3, None), 0.3);
+}
+
+#[test]
+fn a_wheel_acceleration_ramps_the_wheel_commands_and_reads_back() {
+    // 3 rad/s^2 at 30 Hz: 0.1 rad/s per control step. The ramp starts from stopped wheels,
+    // each wheel module on its own, and a stop starts it again from 0.
+    let model = robot("tricycle");
+    let ramped = GoalBounds {
+        wheel_acceleration_rad_s2: Some(3.0),
+        ..BOUNDS
+    };
+    let terms = ActionTerms::new(&model, &ramped).unwrap();
+    assert!(terms.wheels().all(|w| w.acceleration_rad_s2 == Some(3.0)));
+    let limit = terms.wheels().next().unwrap().scale_rad_s;
+    let mut action = vec![0.0_f32; terms.size()];
+    let at = terms.size() - 3;
+    action[at] = 1.0;
+    action[at + 1] = -0.015625; // 2^-6: exact in f32
+    let wanted = terms.commands(&action).unwrap().wheel_velocities;
+    assert_eq!(wanted, [limit, -0.015625 * limit, 0.0]);
+    let mut ramp = WheelRamp::new(&terms, 30.0);
+    let first = ramp.follow(&wanted);
+    assert!((first[0] - 0.1).abs() < 1e-12, "{first:?}");
+    assert_eq!(first[1], -0.015625 * limit); // within one step: at once
+    assert_eq!(first[2], 0.0);
+    let second = ramp.follow(&wanted);
+    assert!((second[0] - 0.2).abs() < 1e-12, "{second:?}");
+    ramp.stop();
+    assert!((ramp.follow(&wanted)[0] - 0.1).abs() < 1e-12);
+    // Without an acceleration the ramp passes the policy's velocities through unchanged.
+    let unramped = ActionTerms::new(&model, &BOUNDS).unwrap();
+    assert_eq!(WheelRamp::new(&unramped, 30.0).follow(&wanted), wanted);
+    // The description carries it to a deployed node; an old file (none) reads back as none.
+    let described = terms.describe();
+    assert!(
+        described.ends_with(&format!(
+            "wheel2:wheel:1:velocity_rad_s={limit}:acceleration_rad_s2=3"
+        )),
+        "{described}"
+    );
+    let back = GoalBounds::from_description(&described).unwrap();
+    assert_eq!(back.wheel_acceleration_rad_s2, Some(3.0));
+    assert_eq!(
+        ActionTerms::new(&model, &back).unwrap().describe(),
+        described
+    );
+    let old = GoalBounds::from_description(&unramped.describe()).unwrap();
+    assert_eq!(old.wheel_acceleration_rad_s2, None);
+    let malformed = described.replace("acceleration_rad_s2=3", "acceleration=3");
+    assert!(GoalBounds::from_description(&malformed).is_err());
+    // The flat baseline takes the same bound; one that is not positive is refused by name.
+    let flat = JointBounds {
+        joint_scale_rad: 0.5,
+        wheel_velocity_rad_s: None,
+        wheel_acceleration_rad_s2: Some(3.0),
+    };
+    let flat_terms = ActionTerms::flat(&model, &flat).unwrap();
+    assert!(flat_terms
+        .wheels()
+        .all(|w| w.acceleration_rad_s2 == Some(3.0)));
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let err = ActionTerms::new(
+            &model,
+            &GoalBounds {
+                wheel_acceleration_rad_s2: Some(bad),
+                ..BOUNDS
+            },
+        )
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("wheel_acceleration_rad_s2"),
+            "{err}"
+        );
+        let flat = JointBounds {
+            wheel_acceleration_rad_s2: Some(bad),
+            ..flat
+        };
+        assert!(ActionTerms::flat(&model, &flat).is_err());
     }
 }

@@ -3,8 +3,10 @@
 //! the value estimates and the log standard deviation. Pure functions over row-major slices:
 //! B rows (samples), A action dimensions.
 //!
-//! total = -mean(min(r A, clip(r, 1 - eps, 1 + eps) A)) + c1 mean((V - R)^2) - c2 H,
-//! r = exp(log pi(a|s) - log pi_old(a|s)).
+//! total = -mean(min(r A, clip(r, 1 - eps, 1 + eps) A)) + c1 mean((V - R)^2) - c2 H
+//!         + cb mean(sum_j excess(mu_j)^2),
+//! r = exp(log pi(a|s) - log pi_old(a|s)), excess(mu) = how far the mean lies past
+//! [-MEAN_BOUND, MEAN_BOUND] (the bound loss of rl_games' `bounds_loss_coef`; 0 unless cb > 0).
 
 use crate::nn::Real;
 
@@ -42,6 +44,10 @@ pub fn gaussian_entropy<T: Real>(log_std: &[T]) -> T {
     log_std.iter().copied().sum::<T>() + T::of(log_std.len() as f64 * (0.5 + HALF_LN_2PI))
 }
 
+/// Where the bound loss starts: every action term clips its values to [-1, 1], so a mean past
+/// it commands no more than 1 does, and nothing but noise tells the policy where it lies.
+pub const MEAN_BOUND: f64 = 1.0;
+
 /// PPO coefficients.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LossCoefficients {
@@ -51,6 +57,14 @@ pub struct LossCoefficients {
     pub value: f64,
     /// Entropy bonus weight c2.
     pub entropy: f64,
+    /// Bound loss weight cb (0: none): keeps the policy's mean within [-MEAN_BOUND,
+    /// MEAN_BOUND].
+    pub bound: f64,
+}
+
+/// How far `mean` lies past [-MEAN_BOUND, MEAN_BOUND] (signed; 0 within).
+pub fn excess(mean: f64) -> f64 {
+    (mean - MEAN_BOUND).max(0.0) + (mean + MEAN_BOUND).min(0.0)
 }
 
 /// The loss and its parts (means over the minibatch), for logging.
@@ -60,6 +74,9 @@ pub struct Loss {
     pub policy: f64,
     pub value: f64,
     pub entropy: f64,
+    /// Mean over samples of the squared excess of the policy's mean, summed over action
+    /// dimensions (0 when the bound loss is off).
+    pub bound: f64,
     /// Mean of (ratio - 1) - ln(ratio): a low-variance estimate of KL(old || new).
     pub approx_kl: f64,
     /// Fraction of samples whose ratio was outside the clipping range.
@@ -83,10 +100,11 @@ pub struct Samples<'a, T> {
 /// gradient. Sums of the per-sample means' terms, so that blocks add up to the minibatch.
 #[derive(Debug, Clone)]
 pub struct BlockLoss<T> {
-    /// Sums over the block of policy, value, approx-KL and clipped terms, each divided by the
-    /// minibatch size.
+    /// Sums over the block of policy, value, bound, approx-KL and clipped terms, each divided
+    /// by the minibatch size.
     pub policy: f64,
     pub value: f64,
+    pub bound: f64,
     pub approx_kl: f64,
     pub clip_fraction: f64,
     /// d total / d mean, [B, A].
@@ -116,6 +134,7 @@ pub fn block_loss<T: Real>(
     let mut out = BlockLoss {
         policy: 0.0,
         value: 0.0,
+        bound: 0.0,
         approx_kl: 0.0,
         clip_fraction: 0.0,
         d_mean: vec![T::zero(); rows * a],
@@ -153,15 +172,24 @@ pub fn block_loss<T: Real>(
         let error = values[i] - samples.returns[i];
         out.value += (error * error).to_f64().unwrap_or(f64::NAN) * scale;
         out.d_value[i] = T::of(2.0 * c.value * scale) * error;
+        if c.bound > 0.0 {
+            for j in 0..a {
+                let e = excess(mean[i * a + j].to_f64().unwrap_or(f64::NAN));
+                out.bound += e * e * scale;
+                out.d_mean[i * a + j] += T::of(2.0 * c.bound * e * scale);
+            }
+        }
     }
     out
 }
 
 /// Adds the entropy term, once per minibatch: returns the loss's parts and adds
 /// `d(-c2 H)/d log_std = -c2` to `d_log_std`.
+#[allow(clippy::too_many_arguments)]
 pub fn finish<T: Real>(
     policy: f64,
     value: f64,
+    bound: f64,
     approx_kl: f64,
     clip_fraction: f64,
     log_std: &[T],
@@ -172,11 +200,13 @@ pub fn finish<T: Real>(
     d_log_std
         .iter_mut()
         .for_each(|d| *d = *d - T::of(c.entropy));
+    let bounded = if c.bound > 0.0 { c.bound * bound } else { 0.0 };
     Loss {
-        total: policy + c.value * value - c.entropy * entropy,
+        total: policy + c.value * value - c.entropy * entropy + bounded,
         policy,
         value,
         entropy,
+        bound,
         approx_kl,
         clip_fraction,
     }
@@ -213,6 +243,7 @@ mod tests {
         let loss = finish(
             block.policy,
             block.value,
+            block.bound,
             block.approx_kl,
             block.clip_fraction,
             &[0.0],
@@ -233,6 +264,7 @@ mod tests {
             clip: 0.2,
             value: 0.5,
             entropy: 0.01,
+            bound: 0.0,
         };
         let (block, loss) = two_samples(&c);
         let policy = -(1.2 - 2.0 * (-0.1_f64).exp()) / 2.0;
@@ -263,6 +295,7 @@ mod tests {
             clip: 0.2,
             value: 0.5,
             entropy: 0.0,
+            bound: 0.0,
         };
         let samples = Samples {
             actions: &[1.0],
@@ -272,5 +305,41 @@ mod tests {
         };
         let block = block_loss(&samples, &[0.0], &[0.0], &[0.0], &c, 1);
         assert!((block.d_mean[0] + 1.0).abs() < 1e-12, "{}", block.d_mean[0]);
+    }
+
+    #[test]
+    fn the_bound_loss_pulls_means_back_inside_the_clip_range_by_hand() {
+        // One sample, three dimensions with means 1.5, -3 and 0.3; no advantage, so only the
+        // bound term moves the means. Excess 0.5, -2 and 0: bound = 0.25 + 4 = 4.25,
+        // d/d mean = 2 cb excess = [0.1, -0.4, 0] at cb = 0.1 (the mean falls toward 1, rises
+        // toward -1).
+        let mean = [1.5_f64, -3.0, 0.3];
+        let lp = gaussian_log_prob(&mean, &mean, &[0.0, 0.0, 0.0]);
+        let samples = Samples {
+            actions: &mean,
+            old_log_prob: &lp,
+            advantages: &[0.0],
+            returns: &[0.0],
+        };
+        let c = LossCoefficients {
+            clip: 0.2,
+            value: 0.5,
+            entropy: 0.0,
+            bound: 0.1,
+        };
+        let block = block_loss(&samples, &mean, &[0.0], &[0.0, 0.0, 0.0], &c, 1);
+        assert!((block.bound - 4.25).abs() < 1e-12);
+        let want = [0.1, -0.4, 0.0];
+        for (d, w) in block.d_mean.iter().zip(want) {
+            assert!((d - w).abs() < 1e-12, "{:?}", block.d_mean);
+        }
+        let mut d = block.d_log_std.clone();
+        let loss = finish(0.0, 0.0, block.bound, 0.0, 0.0, &[0.0; 3], &mut d, &c);
+        assert!((loss.total - 0.425).abs() < 1e-12);
+        // Off, it adds nothing at all.
+        let off = LossCoefficients { bound: 0.0, ..c };
+        let block = block_loss(&samples, &mean, &[0.0], &[0.0, 0.0, 0.0], &off, 1);
+        assert_eq!(block.bound, 0.0);
+        assert!(block.d_mean.iter().all(|d| *d == 0.0));
     }
 }

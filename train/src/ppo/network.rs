@@ -163,6 +163,7 @@ impl<T: Real> ActorCritic<T> {
                 let parts = [
                     block.policy,
                     block.value,
+                    block.bound,
                     block.approx_kl,
                     block.clip_fraction,
                 ];
@@ -171,15 +172,16 @@ impl<T: Real> ActorCritic<T> {
             .collect();
         // Summed in block order: the same bits on any number of threads.
         let mut gradient = Gradient::zeros_like(self);
-        let mut parts = [0.0; 4];
+        let mut parts = [0.0; 5];
         for (g, p) in &blocks {
             gradient.add(g);
             parts.iter_mut().zip(p).for_each(|(s, x)| *s += x);
         }
-        let [policy, value, kl, clipped] = parts;
+        let [policy, value, bound, kl, clipped] = parts;
         let loss = finish(
             policy,
             value,
+            bound,
             kl,
             clipped,
             &self.log_std,

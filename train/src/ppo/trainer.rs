@@ -61,6 +61,11 @@ pub struct PpoConfig {
     /// of the serialised config when unset, so configs without it keep their fingerprints.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub final_log_std: Option<f32>,
+    /// When set, the weight of the bound loss ([`crate::ppo::loss::LossCoefficients::bound`]),
+    /// which keeps the policy's mean within the [-1, 1] the action terms clip to (rl_games'
+    /// `bounds_loss_coef`). Left out of the serialised config when unset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bound_loss_coef: Option<f64>,
 }
 
 fn one() -> f64 {
@@ -117,6 +122,11 @@ impl PpoConfig {
         {
             return Err("anneal_after must lie in [0, 1] and anneal_final be positive".into());
         }
+        if let Some(c) = self.bound_loss_coef {
+            if !(c.is_finite() && c >= 0.0) {
+                return Err(format!("bound_loss_coef ({c}) must be finite and >= 0"));
+            }
+        }
         if let Some(last) = self.final_log_std {
             if !last.is_finite() || last > self.initial_log_std {
                 return Err(format!(
@@ -155,6 +165,7 @@ impl Default for PpoConfig {
             anneal_after: 1.0,
             anneal_final: 1.0,
             final_log_std: None,
+            bound_loss_coef: None,
         }
     }
 }
@@ -363,6 +374,7 @@ impl Learner {
             clip: self.config.clip,
             value: self.config.value_coef,
             entropy: self.config.entropy_coef * anneal,
+            bound: self.config.bound_loss_coef.unwrap_or(0.0),
         };
         if self.config.desired_kl <= 0.0 {
             self.optimizer.learning_rate = self.config.learning_rate * anneal;
@@ -405,6 +417,7 @@ impl Learner {
                 sum.policy += loss.policy;
                 sum.value += loss.value;
                 sum.entropy += loss.entropy;
+                sum.bound += loss.bound;
                 sum.approx_kl += loss.approx_kl;
                 sum.clip_fraction += loss.clip_fraction;
                 count += 1.0;
@@ -416,6 +429,7 @@ impl Learner {
             policy: sum.policy / count,
             value: sum.value / count,
             entropy: sum.entropy / count,
+            bound: sum.bound / count,
             approx_kl: sum.approx_kl / count,
             clip_fraction: sum.clip_fraction / count,
         }
@@ -809,6 +823,8 @@ mod tests {
         assert!(serde_json::to_string(&set)
             .unwrap()
             .contains("\"final_log_std\":-1.9"));
+        // Nor does an unset bound loss.
+        assert!(!text.contains("bound_loss_coef"), "{text}");
     }
 
     #[test]
@@ -844,6 +860,14 @@ mod tests {
             PpoConfig {
                 final_log_std: Some(-1.0), // never reached: nothing anneals
                 anneal_after: 1.0,
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                bound_loss_coef: Some(-0.01),
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                bound_loss_coef: Some(f64::NAN),
                 ..PpoConfig::default()
             },
         ] {
