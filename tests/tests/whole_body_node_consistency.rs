@@ -31,8 +31,14 @@ const BOUNDS: GoalBounds = GoalBounds {
     wheel_acceleration_rad_s2: None,
 };
 
-fn env(model: Arc<RobotModel>, engine: Engine) -> WholeBody {
-    let config = kumi_tests::whole_body_config(engine, 3.0, BOUNDS);
+/// [`BOUNDS`] with the wheel commands ramped at 3 rad/s^2 (0.1 rad/s per control step).
+const RAMPED: GoalBounds = GoalBounds {
+    wheel_acceleration_rad_s2: Some(3.0),
+    ..BOUNDS
+};
+
+fn env(model: Arc<RobotModel>, engine: Engine, bounds: GoalBounds) -> WholeBody {
+    let config = kumi_tests::whole_body_config(engine, 3.0, bounds);
     let skill = std::fs::read(kumi_runtime::shipped_arm_policy()).unwrap();
     WholeBody::new(model, config, &skill, 3).unwrap()
 }
@@ -65,9 +71,11 @@ fn snapshot(
     }
 }
 
-fn check(name: &str, engine: Engine) {
+/// The node's observations equal training's bit for bit, and so do its wheel commands and
+/// those training sent the simulator (with `bounds`' ramp, if any).
+fn check(name: &str, engine: Engine, bounds: GoalBounds) {
     let model = model(name);
-    let mut env = env(model.clone(), engine);
+    let mut env = env(model.clone(), engine, bounds);
     let seen: Arc<Mutex<Vec<f32>>> = Arc::default();
     let record = seen.clone();
     let size = env.terms().size();
@@ -80,7 +88,7 @@ fn check(name: &str, engine: Engine) {
             .map(|i| (0.7 * (k as f32) + 1.3 * i as f32).sin() * 1.2)
             .collect())
     });
-    let terms = ActionTerms::new(&model, &BOUNDS).unwrap();
+    let terms = ActionTerms::new(&model, &bounds).unwrap();
     let mut controller = WholeBodyController::new(&model, terms, policy).unwrap();
     let mut worst = (0.0_f32, String::new());
     for step in 0..40 {
@@ -99,6 +107,18 @@ fn check(name: &str, engine: Engine) {
         let action = decision.action.expect("a target is set: the policy ran");
         let out = env.step(&action);
         assert!(!out.terminated || step > 0, "{name}: fell at once");
+        let node_wheels: Vec<f64> = decision.wheel_velocities.iter().map(|w| w.1).collect();
+        let commanded = wheel_commands(env.world());
+        let per_module = commanded.len() / node_wheels.len();
+        for (m, v) in node_wheels.iter().enumerate() {
+            for c in &commanded[m * per_module..(m + 1) * per_module] {
+                assert_eq!(
+                    c.abs(),
+                    v.abs(),
+                    "{name} ({engine}) step {step}: wheel module {m}"
+                );
+            }
+        }
     }
     assert!(
         worst.0 == 0.0,
@@ -108,10 +128,21 @@ fn check(name: &str, engine: Engine) {
     );
 }
 
+/// The simulator's velocity commands [rad/s] of every wheel joint, in actuator order.
+fn wheel_commands(world: &dyn kumi_worlds::SimWorld) -> Vec<f64> {
+    let modes = world.servos().actuators().iter().map(|a| a.mode);
+    modes
+        .zip(world.commands())
+        .filter(|(mode, _)| *mode == kumi_model::ActuatorMode::Velocity)
+        .map(|(_, c)| c)
+        .collect()
+}
+
 #[test]
 fn the_node_observation_equals_training_bit_for_bit_rapier() {
     for name in ["minimal", "dragon", "tricycle"] {
-        check(name, Engine::Rapier);
+        check(name, Engine::Rapier, BOUNDS);
+        check(name, Engine::Rapier, RAMPED);
     }
 }
 
@@ -119,7 +150,8 @@ fn the_node_observation_equals_training_bit_for_bit_rapier() {
 #[test]
 fn the_node_observation_equals_training_bit_for_bit_mujoco() {
     for name in ["minimal", "dragon", "tricycle"] {
-        check(name, Engine::Mujoco);
+        check(name, Engine::Mujoco, BOUNDS);
+        check(name, Engine::Mujoco, RAMPED);
     }
 }
 

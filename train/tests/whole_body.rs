@@ -508,3 +508,27 @@ fn a_wheel_acceleration_ramps_the_commanded_wheel_velocities_from_each_episodes_
         }
     }
 }
+
+#[test]
+fn unset_wheel_bounds_leave_a_configs_serialisation_as_it_was() {
+    // Exported policies record a fingerprint of their config's values: configs written before
+    // the wheel bounds existed must serialise as they did.
+    let ArmControl::Skill(bounds) = config(1.0).arms else {
+        panic!("over the skill")
+    };
+    let text = serde_json::to_string(&bounds).unwrap();
+    assert!(!text.contains("wheel_"), "{text}");
+    let flat = JointBounds {
+        joint_scale_rad: 0.5,
+        wheel_velocity_rad_s: None,
+        wheel_acceleration_rad_s2: None,
+    };
+    let text = serde_json::to_string(&flat).unwrap();
+    assert!(!text.contains("wheel_"), "{text}");
+    let ramped = GoalBounds {
+        wheel_acceleration_rad_s2: Some(3.0),
+        ..bounds
+    };
+    let text = serde_json::to_string(&ramped).unwrap();
+    assert!(text.contains("\"wheel_acceleration_rad_s2\":3.0"), "{text}");
+}

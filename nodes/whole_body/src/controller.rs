@@ -246,9 +246,9 @@ impl WholeBodyController {
     }
 
     /// Holds: wheels stop (at once: a ramp's rate limit does not slow a hold), arms keep their
-    /// last goals, the previous action starts over. Before
-    /// the first target nothing is commanded at all: the bridge holds what it was never told
-    /// to move, and in lockstep simulated time stands still until there is a target.
+    /// last goals, the previous action starts over. Before the first target nothing is
+    /// commanded at all: the bridge holds what it was never told to move, and in lockstep
+    /// simulated time stands still until there is a target.
     pub fn hold(&mut self, why: Hold, tool_pose_w: Option<Isometry3<f64>>) -> Decision {
         self.previous_action.iter_mut().for_each(|a| *a = 0.0);
         self.wheel_ramp.stop();

@@ -95,8 +95,9 @@ impl GoalBounds {
     /// ([`ActionTerms::describe`], the `kumi.action` metadata): a deployed node takes them from
     /// the policy file, not from a training config. Bounds of a role the robot lacks are 0; the
     /// wheel bound is the largest wheel velocity described (none without wheels; for a policy
-    /// trained without a bound, the wheels' own limit), and so is its acceleration (none
-    /// where no wheel entry names one). The caller still checks the whole
+    /// trained without a bound, the wheels' own limit); the wheel acceleration is the one every
+    /// wheel entry names (none where none does; entries that differ are refused). The caller
+    /// still checks the whole
     /// contract: terms built from these bounds must describe themselves exactly as the file
     /// does.
     pub fn from_description(description: &str) -> Result<Self, TermError> {
@@ -110,6 +111,8 @@ impl GoalBounds {
             wheel_acceleration_rad_s2: None,
         };
         let mut seen: Vec<(&str, f64, f64)> = Vec::new();
+        // Every wheel entry's acceleration (none, or one value for all: one bound made them).
+        let mut wheel_acceleration: Option<Option<f64>> = None;
         for entry in description.split(';').filter(|e| !e.is_empty()) {
             let fields: Vec<&str> = entry.split(':').collect();
             let role = *fields
@@ -132,11 +135,17 @@ impl GoalBounds {
                 let largest = |old: Option<f64>, new: f64| Some(old.map_or(new, |v| v.max(new)));
                 let velocity = value(3, "velocity_rad_s")?;
                 bounds.wheel_velocity_rad_s = largest(bounds.wheel_velocity_rad_s, velocity);
-                if fields.len() > 4 {
-                    let acceleration = value(4, "acceleration_rad_s2")?;
-                    bounds.wheel_acceleration_rad_s2 =
-                        largest(bounds.wheel_acceleration_rad_s2, acceleration);
+                let acceleration = match fields.len() > 4 {
+                    true => Some(value(4, "acceleration_rad_s2")?),
+                    false => None,
+                };
+                if wheel_acceleration.is_some_and(|a| a != acceleration) {
+                    return Err(bad(format!(
+                        "`{entry}`: wheel modules with different accelerations"
+                    )));
                 }
+                wheel_acceleration = Some(acceleration);
+                bounds.wheel_acceleration_rad_s2 = acceleration;
                 continue;
             }
             let position = value(3, "position_m")?;

@@ -364,6 +364,9 @@ fn a_ramp_moves_toward_the_wanted_velocity_by_at_most_its_step() {
     assert_eq!(seen, [0.1, 0.2, 0.30000000000000004, 0.35]);
     assert_eq!(ramp(1.0, -1.0, Some(0.5)), 0.5);
     assert_eq!(ramp(0.2, 0.25, Some(0.5)), 0.25);
+    // A gap of exactly one step lands on the wanted value, either way.
+    assert_eq!(ramp(0.0, 0.5, Some(0.5)), 0.5);
+    assert_eq!(ramp(0.0, -0.5, Some(0.5)), -0.5);
     // No limit: the wanted value itself, bit for bit (an unramped policy's commands do not
     // change).
     assert_eq!(ramp(0.1, 0.3, None), 0.3);
@@ -417,6 +420,13 @@ fn a_wheel_acceleration_ramps_the_wheel_commands_and_reads_back() {
     assert_eq!(old.wheel_acceleration_rad_s2, None);
     let malformed = described.replace("acceleration_rad_s2=3", "acceleration=3");
     assert!(GoalBounds::from_description(&malformed).is_err());
+    // Wheel entries that disagree (one bound makes them all) are refused by name.
+    let differ = described.replacen("acceleration_rad_s2=3", "acceleration_rad_s2=4", 1);
+    let some = described.replacen(":acceleration_rad_s2=3", "", 1);
+    for bad in [differ, some] {
+        let err = GoalBounds::from_description(&bad).unwrap_err();
+        assert!(err.to_string().contains("different accelerations"), "{err}");
+    }
     // The flat baseline takes the same bound; one that is not positive is refused by name.
     let flat = JointBounds {
         joint_scale_rad: 0.5,

@@ -6,7 +6,8 @@
 //! total = -mean(min(r A, clip(r, 1 - eps, 1 + eps) A)) + c1 mean((V - R)^2) - c2 H
 //!         + cb mean(sum_j excess(mu_j)^2),
 //! r = exp(log pi(a|s) - log pi_old(a|s)), excess(mu) = how far the mean lies past
-//! [-MEAN_BOUND, MEAN_BOUND] (the bound loss of rl_games' `bounds_loss_coef`; 0 unless cb > 0).
+//! [-MEAN_BOUND, MEAN_BOUND] (the form of rl_games' `bounds_loss_coef`, from +-1 rather than its
+//! soft bound of 1.1; 0 unless cb > 0).
 
 use crate::nn::Real;
 
@@ -62,8 +63,11 @@ pub struct LossCoefficients {
     pub bound: f64,
 }
 
-/// How far `mean` lies past [-MEAN_BOUND, MEAN_BOUND] (signed; 0 within).
+/// How far `mean` lies past [-MEAN_BOUND, MEAN_BOUND] (signed; 0 within; NaN for NaN).
 pub fn excess(mean: f64) -> f64 {
+    if mean.is_nan() {
+        return f64::NAN;
+    }
     (mean - MEAN_BOUND).max(0.0) + (mean + MEAN_BOUND).min(0.0)
 }
 

@@ -62,8 +62,9 @@ pub struct PpoConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub final_log_std: Option<f32>,
     /// When set, the weight of the bound loss ([`crate::ppo::loss::LossCoefficients::bound`]),
-    /// which keeps the policy's mean within the [-1, 1] the action terms clip to (rl_games'
-    /// `bounds_loss_coef`). Left out of the serialised config when unset.
+    /// which keeps the policy's mean within the [-1, 1] the action terms clip to (the form of
+    /// rl_games' `bounds_loss_coef`, from 1 rather than its 1.1). Left out of the serialised
+    /// config when unset; 0 is refused (leave it out).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bound_loss_coef: Option<f64>,
 }
@@ -123,8 +124,10 @@ impl PpoConfig {
             return Err("anneal_after must lie in [0, 1] and anneal_final be positive".into());
         }
         if let Some(c) = self.bound_loss_coef {
-            if !(c.is_finite() && c >= 0.0) {
-                return Err(format!("bound_loss_coef ({c}) must be finite and >= 0"));
+            if !(c.is_finite() && c > 0.0) {
+                return Err(format!(
+                    "bound_loss_coef ({c}) must be finite and > 0 (leave it out for none)"
+                ));
             }
         }
         if let Some(last) = self.final_log_std {
@@ -868,6 +871,10 @@ mod tests {
             },
             PpoConfig {
                 bound_loss_coef: Some(f64::NAN),
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                bound_loss_coef: Some(0.0), // as unset, but a different fingerprint
                 ..PpoConfig::default()
             },
         ] {
