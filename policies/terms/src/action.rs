@@ -52,7 +52,7 @@ impl GoalBounds {
                 name,
                 value: *value,
             }),
-            None => check_wheel(self.wheel_velocity_rad_s, self.wheel_acceleration_rad_s2),
+            None => self.wheel().check(),
         }
     }
 
@@ -65,20 +65,20 @@ impl GoalBounds {
     }
 }
 
-/// The wheel bounds, where set, must be positive.
-fn check_wheel(
-    velocity_rad_s: Option<f64>,
-    acceleration_rad_s2: Option<f64>,
-) -> Result<(), TermError> {
-    velocity_rad_s.map_or(Ok(()), |v| check_positive("wheel_velocity_rad_s", v))?;
-    acceleration_rad_s2.map_or(Ok(()), |a| check_positive("wheel_acceleration_rad_s2", a))
-}
-
 /// What bounds every wheel term of a policy (unset: the module's own limit, no ramp).
 #[derive(Debug, Clone, Copy)]
 struct WheelBounds {
     velocity_rad_s: Option<f64>,
     acceleration_rad_s2: Option<f64>,
+}
+
+impl WheelBounds {
+    /// The wheel bounds, where set, must be positive.
+    fn check(&self) -> Result<(), TermError> {
+        let positive = |name, bound: Option<f64>| bound.map_or(Ok(()), |v| check_positive(name, v));
+        positive("wheel_velocity_rad_s", self.velocity_rad_s)?;
+        positive("wheel_acceleration_rad_s2", self.acceleration_rad_s2)
+    }
 }
 
 /// A scale that must be finite and above 0.
@@ -337,7 +337,7 @@ pub struct JointBounds {
 impl JointBounds {
     fn check(&self) -> Result<(), TermError> {
         check_positive("joint_scale_rad", self.joint_scale_rad)?;
-        check_wheel(self.wheel_velocity_rad_s, self.wheel_acceleration_rad_s2)
+        self.wheel().check()
     }
 
     fn wheel(&self) -> WheelBounds {

@@ -204,9 +204,8 @@ pub fn finish<T: Real>(
     d_log_std
         .iter_mut()
         .for_each(|d| *d = *d - T::of(c.entropy));
-    let bounded = if c.bound > 0.0 { c.bound * bound } else { 0.0 };
     Loss {
-        total: policy + c.value * value - c.entropy * entropy + bounded,
+        total: policy + c.value * value - c.entropy * entropy + c.bound * bound,
         policy,
         value,
         entropy,
