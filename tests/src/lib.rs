@@ -345,6 +345,7 @@ pub fn whole_body_config(
             alive: 0.2,
             fall: 0.0,
             tilt: 0.0,
+            turn: 0.0,
         },
         penalty: Default::default(),
         arms: kumi_train::whole_body::ArmControl::Skill(bounds),

@@ -35,6 +35,12 @@ pub struct BodyWeights {
     /// Absent in a config: 0, and left out of the serialised config like `fall`.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub tilt: f64,
+    /// Turn penalty `-turn * (|v_xy| * |w_z|)^2` per step [1/(m/s^2)^2]: the squared lateral
+    /// acceleration of a turn, the base's horizontal speed [m/s] times its yaw rate [rad/s]
+    /// (kumi's; the paper has none). Tricycle's falls follow fast turns at speed. Absent in a
+    /// config: 0, and left out of the serialised config like `fall`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub turn: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -71,6 +77,8 @@ pub struct BodyTerms {
     pub fall: f64,
     /// The base tilt penalty.
     pub tilt: f64,
+    /// The turn penalty.
+    pub turn: f64,
     /// Eq. 5 (penalty baseline only).
     pub leg_orientation: f64,
     /// Eq. 6 (penalty baseline only).
@@ -87,6 +95,7 @@ impl BodyTerms {
             + self.alive
             + self.fall
             + self.tilt
+            + self.turn
             + self.leg_orientation
             + self.contact
     }
@@ -115,6 +124,13 @@ pub fn fall_penalty(w_fall: f64, fell: bool) -> f64 {
 /// by `tilt_rad` ([`tilt`]).
 pub fn tilt_penalty(w_tilt: f64, tilt_rad: f64) -> f64 {
     -w_tilt * tilt_rad.sin().powi(2)
+}
+
+/// `-w_turn (|v_xy| |w_z|)^2` for the base's horizontal speed `speed_xy_m_s` [m/s] and yaw
+/// rate `yaw_rate_rad_s` [rad/s]: the squared centripetal acceleration [m/s^2] of a base that
+/// drives along its heading while it turns.
+pub fn turn_penalty(w_turn: f64, speed_xy_m_s: f64, yaw_rate_rad_s: f64) -> f64 {
+    -w_turn * (speed_xy_m_s * yaw_rate_rad_s).powi(2)
 }
 
 /// Eq. 6: `-w_c` when an undesired arm contact occurs, else 0.
@@ -169,6 +185,7 @@ mod tests {
         alive: 0.2,
         fall: 0.0,
         tilt: 0.0,
+        turn: 0.0,
     };
 
     #[test]
@@ -235,5 +252,27 @@ mod tests {
         assert!(serde_json::to_string(&with)
             .unwrap()
             .contains("\"tilt\":3.0"));
+    }
+
+    #[test]
+    fn the_turn_penalty_by_hand() {
+        // 0.8 m/s at 0.5 rad/s: 0.4 m/s^2 of lateral acceleration, squared 0.16, times 2.
+        assert!((turn_penalty(2.0, 0.8, 0.5) + 0.32).abs() < 1e-12);
+        // Either sign of the turn costs the same; turning in place or driving straight, nothing.
+        assert_eq!(turn_penalty(2.0, 0.8, -0.5), turn_penalty(2.0, 0.8, 0.5));
+        assert_eq!(turn_penalty(2.0, 0.0, 1.0), 0.0);
+        assert_eq!(turn_penalty(2.0, 1.0, 0.0), 0.0);
+        let t = BodyTerms {
+            alive: 0.5,
+            turn: -0.32,
+            ..BodyTerms::default()
+        };
+        assert!((t.total() - 0.18).abs() < 1e-12);
+        // Unset, it stays out of the serialised weights: older configs keep their fingerprints.
+        assert!(!serde_json::to_string(&W).unwrap().contains("turn"));
+        let with = BodyWeights { turn: 2.0, ..W };
+        assert!(serde_json::to_string(&with)
+            .unwrap()
+            .contains("\"turn\":2.0"));
     }
 }

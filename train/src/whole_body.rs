@@ -27,7 +27,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::arm_reach::EnvError;
 use crate::body_reward::{
     body_terms, contact_penalty, fall_penalty, fallen, leg_orientation_reward, tilt, tilt_penalty,
-    BodyTerms, BodyWeights, PenaltyWeights,
+    turn_penalty, BodyTerms, BodyWeights, PenaltyWeights,
 };
 use crate::evaluate_body::{leg_angles, ContactRule};
 
@@ -418,6 +418,10 @@ impl WholeBody {
                 self.config.weights.tilt,
                 tilt(&self.world.base_pose().rotation),
             );
+        }
+        if self.config.weights.turn != 0.0 {
+            let (v_w, w_w) = self.world.base_twist_w();
+            terms.turn = turn_penalty(self.config.weights.turn, v_w.xy().norm(), w_w.z);
         }
         let terminated = self.world.diverged() || fell;
         BodyStep {

@@ -7,7 +7,7 @@ use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
 use kumi_policies::observation::{self, Goal};
 use kumi_terms::action::{GoalBounds, JointBounds};
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig};
-use kumi_train::body_reward::{BodyWeights, PenaltyWeights};
+use kumi_train::body_reward::{turn_penalty, BodyWeights, PenaltyWeights};
 use kumi_train::whole_body::{ArmControl, TaskConfig, WholeBody, WholeBodyConfig};
 use kumi_worlds::{default_training_engine, home_joint_positions, RobotState};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -43,6 +43,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             alive: 0.0,
             fall: 0.0,
             tilt: 0.0,
+            turn: 0.0,
         },
         penalty: PenaltyWeights::default(),
         arms: ArmControl::Skill(GoalBounds {
@@ -251,6 +252,32 @@ fn a_tilt_past_the_limit_terminates() {
     let step = env.step(&[0.0; 21]);
     assert!(!step.terminated);
     assert_eq!(step.terms.fall, 0.0);
+}
+
+#[test]
+fn the_turn_penalty_follows_the_bases_speed_and_yaw_rate() {
+    // Unweighted, no step carries it; weighted, each step carries the rule's value for the
+    // base's twist after that step, and a robot that drives while its legs steer pays it.
+    let mut weighted = config(1.5);
+    weighted.weights.turn = 2.0;
+    let action = [0.6_f32; 21];
+    let mut plain = WholeBody::new(model("tricycle"), config(1.5), &skill(), 5).unwrap();
+    let mut env = WholeBody::new(model("tricycle"), weighted, &skill(), 5).unwrap();
+    plain.reset();
+    env.reset();
+    let mut paid = 0.0;
+    for _ in 0..30 {
+        assert_eq!(plain.step(&action).terms.turn, 0.0);
+        let step = env.step(&action);
+        let (v_w, w_w) = env.world().base_twist_w();
+        let expected = turn_penalty(2.0, v_w.xy().norm(), w_w.z);
+        assert_eq!(step.terms.turn, expected);
+        paid += step.terms.turn;
+    }
+    assert!(
+        paid < -1e-4,
+        "a driving, steering robot turned for nothing: {paid}"
+    );
 }
 
 #[test]
