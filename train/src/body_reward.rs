@@ -35,9 +35,9 @@ pub struct BodyWeights {
     /// Absent in a config: 0, and left out of the serialised config like `fall`.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub tilt: f64,
-    /// Turn penalty `-turn * (|v_xy| * |w_z|)^2` per step [1/(m/s^2)^2]: the squared lateral
-    /// acceleration of a turn, the base's horizontal speed [m/s] times its yaw rate [rad/s]
-    /// (kumi's; the paper has none). Tricycle's falls follow fast turns at speed. Absent in a
+    /// Turn penalty `-turn * (|v_xy| * |w_z|)^2` per step [1/(m/s^2)^2]: the base's horizontal
+    /// speed [m/s] times its yaw rate [rad/s], squared, the lateral acceleration of a turn
+    /// without sideslip (kumi's; the paper has none). Tricycle's falls follow fast turns at speed. Absent in a
     /// config: 0, and left out of the serialised config like `fall`.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub turn: f64,

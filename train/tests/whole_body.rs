@@ -267,11 +267,20 @@ fn the_turn_penalty_follows_the_bases_speed_and_yaw_rate() {
     env.reset();
     let mut paid = 0.0;
     for _ in 0..30 {
-        assert_eq!(plain.step(&action).terms.turn, 0.0);
+        let unweighted = plain.step(&action);
+        assert_eq!(unweighted.terms.turn, 0.0);
         let step = env.step(&action);
         let (v_w, w_w) = env.world().base_twist_w();
         let expected = turn_penalty(2.0, v_w.xy().norm(), w_w.z);
         assert_eq!(step.terms.turn, expected);
+        // The same seed and actions give the same physics: the rewards differ by the term alone.
+        assert!(
+            (step.reward - unweighted.reward - step.terms.turn).abs() < 1e-12,
+            "{} - {} is not the turn term {}",
+            step.reward,
+            unweighted.reward,
+            step.terms.turn
+        );
         paid += step.terms.turn;
     }
     assert!(
