@@ -8,6 +8,7 @@ use std::sync::Arc;
 
 use kumi_model::{RobotModel, Role};
 use kumi_terms::observation::{tool_yaw, Target};
+use kumi_terms::termination::tilt;
 use kumi_worlds::{SimWorld, GROUND};
 use nalgebra::Vector3;
 use rand::SeedableRng;
@@ -176,7 +177,8 @@ pub struct TraceStep {
     pub tool: [f64; 4],
     /// Tool position error [m] and absolute yaw error [rad].
     pub errors: [f64; 2],
-    /// Base tilt [rad]: the angle between its z axis and the world's.
+    /// Base tilt [rad]: the angle between its z axis and the world's, by the rule a fall is
+    /// judged by ([`tilt`]).
     pub tilt_rad: f64,
     /// The action that led here, as the policy output it (with any evaluation noise, before
     /// the terms clip it); empty at the episode's start.
@@ -202,7 +204,7 @@ impl TraceStep {
             base: [b.x, b.y, tool_yaw(&base.rotation)],
             tool: [t.x, t.y, t.z, tool_yaw(&tool.rotation)],
             errors: [position, yaw],
-            tilt_rad: env.world().base_tilt(),
+            tilt_rad: tilt(&base.rotation),
             action: action.to_vec(),
         }
     }
