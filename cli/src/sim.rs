@@ -227,6 +227,7 @@ fn goal_for(model: &RobotModel, module: &ModuleInstance, leg_roll_rad: f64) -> R
         leg_roll_rad: leg_roll_rad.abs(),
         wheel_velocity_rad_s: None,
         wheel_acceleration_rad_s2: None,
+        lateral_acceleration_m_s2: None,
     };
     let term = ArmGoalTerm::new(model, module, &bounds)?;
     let mut action = vec![0.0_f32; term.width()];

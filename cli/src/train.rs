@@ -651,12 +651,20 @@ mod tests {
         assert!(err.to_string().contains("no shipped penalty"), "{err}");
     }
 
-    /// The bounds on the wheels a config's policy may command: velocity [rad/s] and
-    /// acceleration [rad/s^2].
-    fn wheel_bound(config: &TrainBodyConfig) -> (Option<f64>, Option<f64>) {
+    /// The bounds on the wheels a config's policy may command: velocity [rad/s],
+    /// acceleration [rad/s^2] and the turn governor's lateral acceleration [m/s^2].
+    fn wheel_bound(config: &TrainBodyConfig) -> (Option<f64>, Option<f64>, Option<f64>) {
         match config.arms().unwrap() {
-            ArmControl::Skill(b) => (b.wheel_velocity_rad_s, b.wheel_acceleration_rad_s2),
-            ArmControl::Joints(b) => (b.wheel_velocity_rad_s, b.wheel_acceleration_rad_s2),
+            ArmControl::Skill(b) => (
+                b.wheel_velocity_rad_s,
+                b.wheel_acceleration_rad_s2,
+                b.lateral_acceleration_m_s2,
+            ),
+            ArmControl::Joints(b) => (
+                b.wheel_velocity_rad_s,
+                b.wheel_acceleration_rad_s2,
+                b.lateral_acceleration_m_s2,
+            ),
         }
     }
 
@@ -678,7 +686,7 @@ mod tests {
                     assert_eq!(
                         wheel_bound(&config),
                         wheel_bound(&hierarchical),
-                        "{robot} {variant}: the wheels' velocity and acceleration bounds"
+                        "{robot} {variant}: the wheels' velocity, acceleration and turn bounds"
                     );
                 }
             }
@@ -725,6 +733,42 @@ mod tests {
             },
             first.ppo
         );
+    }
+
+    #[test]
+    fn tricycles_governed_configs_add_only_the_turn_governor() {
+        // Stop 29's candidate (policies/candidates/tricycle_whole_body_governed.onnx): each stage
+        // is the shipped one with a turn governor of 0.1 m/s^2 and nothing else.
+        let dir =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../train/configs/whole_body");
+        for stage in ["tricycle", "tricycle_settle"] {
+            let read = |name: String| {
+                read_body_config(Some(&dir.join(name)), "tricycle", Variant::Hierarchical).unwrap()
+            };
+            let shipped = read(format!("{stage}.toml"));
+            let governed = read(format!(
+                "{}.toml",
+                stage.replace("tricycle", "tricycle_governed")
+            ));
+            let (Some(ArmControl::Skill(s)), Some(ArmControl::Skill(g))) =
+                (shipped.arms().ok(), governed.arms().ok())
+            else {
+                panic!("{stage}: over the skill")
+            };
+            assert_eq!(g.lateral_acceleration_m_s2, Some(0.1), "{stage}");
+            assert_eq!(
+                GoalBounds {
+                    lateral_acceleration_m_s2: None,
+                    ..g
+                },
+                s,
+                "{stage}"
+            );
+            assert_eq!(governed.ppo, shipped.ppo, "{stage}");
+            assert_eq!(governed.task, shipped.task, "{stage}");
+            assert_eq!(governed.reward, shipped.reward, "{stage}");
+            assert_eq!(governed.penalty, shipped.penalty, "{stage}");
+        }
     }
 
     /// The manipulator tool's height [m] with the robot standing at home.

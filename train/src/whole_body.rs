@@ -387,7 +387,11 @@ impl WholeBody {
                     .expect("targets are finite and sized for the module");
             }
         }
-        let wheel_velocities = self.wheel_ramp.follow(&commands.wheel_velocities);
+        let mut wheel_commands = commands.wheel_velocities;
+        let (v_w, w_w) = self.world.base_twist_w();
+        self.terms
+            .govern(&mut wheel_commands, v_w.xy().norm(), w_w.z);
+        let wheel_velocities = self.wheel_ramp.follow(&wheel_commands);
         for (module, v) in self.wheel_modules.iter().zip(&wheel_velocities) {
             self.world
                 .set_wheel_velocity(module, *v)

@@ -53,6 +53,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             leg_roll_rad: 0.5,
             wheel_velocity_rad_s: None,
             wheel_acceleration_rad_s2: None,
+            lateral_acceleration_m_s2: None,
         }),
     }
 }
@@ -156,6 +157,7 @@ fn the_flat_baseline_is_the_same_environment_with_joint_targets_and_the_arms_sta
             joint_scale_rad: 0.5,
             wheel_velocity_rad_s: None,
             wheel_acceleration_rad_s2: None,
+            lateral_acceleration_m_s2: None,
         }),
         ..engine_config
     };
@@ -553,18 +555,31 @@ fn unset_wheel_bounds_leave_a_configs_serialisation_as_it_was() {
         panic!("over the skill")
     };
     let text = serde_json::to_string(&bounds).unwrap();
-    assert!(!text.contains("wheel_"), "{text}");
+    assert!(
+        !text.contains("wheel_") && !text.contains("lateral"),
+        "{text}"
+    );
     let flat = JointBounds {
         joint_scale_rad: 0.5,
         wheel_velocity_rad_s: None,
         wheel_acceleration_rad_s2: None,
+        lateral_acceleration_m_s2: None,
     };
     let text = serde_json::to_string(&flat).unwrap();
-    assert!(!text.contains("wheel_"), "{text}");
+    assert!(
+        !text.contains("wheel_") && !text.contains("lateral"),
+        "{text}"
+    );
     let ramped = GoalBounds {
         wheel_acceleration_rad_s2: Some(3.0),
         ..bounds
     };
     let text = serde_json::to_string(&ramped).unwrap();
     assert!(text.contains("\"wheel_acceleration_rad_s2\":3.0"), "{text}");
+    let governed = GoalBounds {
+        lateral_acceleration_m_s2: Some(0.1),
+        ..bounds
+    };
+    let text = serde_json::to_string(&governed).unwrap();
+    assert!(text.contains("\"lateral_acceleration_m_s2\":0.1"), "{text}");
 }

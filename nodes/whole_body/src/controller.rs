@@ -229,13 +229,20 @@ impl WholeBodyController {
             .collect();
         self.last_goals = Some(goals.clone());
         self.previous_action.copy_from_slice(&action);
+        let mut wheel_velocities = commands.wheel_velocities;
+        let base = &state.base;
+        self.terms.govern(
+            &mut wheel_velocities,
+            base.linear_velocity_w.xy().norm(),
+            base.angular_velocity_w.z,
+        );
         Decision {
             goals: Some(goals),
             wheel_velocities: self
                 .terms
                 .wheels()
                 .map(|w| w.module.clone())
-                .zip(self.wheel_ramp.follow(&commands.wheel_velocities))
+                .zip(self.wheel_ramp.follow(&wheel_velocities))
                 .collect(),
             hold: None,
             tool_pose_w: Some(tool_pose_w),
@@ -289,16 +296,30 @@ mod tests {
     /// Tricycle's controller, its wheels ramped at `acceleration_rad_s2`, over a policy that
     /// always answers `answer` for every value.
     fn tricycle_with(acceleration_rad_s2: Option<f64>, answer: f32) -> WholeBodyController {
+        tricycle_bounded(
+            GoalBounds {
+                wheel_acceleration_rad_s2: acceleration_rad_s2,
+                ..BOUNDS
+            },
+            answer,
+        )
+    }
+
+    /// Tricycle's shipped goal bounds, no ramp, no governor.
+    const BOUNDS: GoalBounds = GoalBounds {
+        manipulator_position_m: 0.25,
+        manipulator_rotation_rad: 0.5,
+        leg_position_m: 0.05,
+        leg_roll_rad: 1.5,
+        wheel_velocity_rad_s: None,
+        wheel_acceleration_rad_s2: None,
+        lateral_acceleration_m_s2: None,
+    };
+
+    /// Tricycle's controller with `bounds`, over a policy that always answers `answer`.
+    fn tricycle_bounded(bounds: GoalBounds, answer: f32) -> WholeBodyController {
         let library = ModuleLibrary::shipped();
         let model = assemble(&load_morphology("tricycle", &library).unwrap(), &library);
-        let bounds = GoalBounds {
-            manipulator_position_m: 0.25,
-            manipulator_rotation_rad: 0.5,
-            leg_position_m: 0.05,
-            leg_roll_rad: 1.5,
-            wheel_velocity_rad_s: None,
-            wheel_acceleration_rad_s2: acceleration_rad_s2,
-        };
         let terms = ActionTerms::new(&model, &bounds).unwrap();
         let size = terms.size();
         let policy: PolicyFn = Box::new(move |_| Ok(vec![answer; size]));
@@ -324,6 +345,7 @@ mod tests {
                     UnitQuaternion::from_axis_angle(&Vector3::x_axis(), tilt_rad),
                 ),
                 linear_velocity_w: Vector3::zeros(),
+                angular_velocity_w: Vector3::zeros(),
             },
             modules,
             synchronous: true,
@@ -401,6 +423,32 @@ mod tests {
         let mut free = tricycle_with(None, 1.0);
         free.set_target(target(1.0));
         let d = free.step(&state(&free, 0.0));
+        assert!(speeds(&d).iter().all(|v| *v == 5.0), "{d:?}");
+    }
+
+    #[test]
+    fn a_turn_governor_scales_the_wheels_by_the_odometrys_speed_and_yaw_rate() {
+        // 0.5 m/s at 0.4 rad/s is 0.2 m/s^2; the governor allows 0.1: half speed.
+        let governed = GoalBounds {
+            lateral_acceleration_m_s2: Some(0.1),
+            ..BOUNDS
+        };
+        let mut c = tricycle_bounded(governed, 1.0);
+        c.set_target(target(1.0));
+        let moving = |c: &WholeBodyController, v: [f64; 2], w_z: f64| {
+            let mut s = state(c, 0.0);
+            s.base.linear_velocity_w = Vector3::new(v[0], v[1], 0.0);
+            s.base.angular_velocity_w = Vector3::new(0.0, 0.0, w_z);
+            s
+        };
+        let speeds =
+            |d: &Decision| -> Vec<f64> { d.wheel_velocities.iter().map(|w| w.1).collect() };
+        let d = c.step(&moving(&c, [0.3, -0.4], -0.4));
+        assert!(speeds(&d).iter().all(|v| (v - 2.5).abs() < 1e-9), "{d:?}");
+        // Turning in place, or driving straight, is not governed.
+        let d = c.step(&moving(&c, [0.0, 0.0], 2.0));
+        assert!(speeds(&d).iter().all(|v| *v == 5.0), "{d:?}");
+        let d = c.step(&moving(&c, [1.0, 0.0], 0.0));
         assert!(speeds(&d).iter().all(|v| *v == 5.0), "{d:?}");
     }
 }

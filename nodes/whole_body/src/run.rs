@@ -242,18 +242,21 @@ fn open_io(
     })
 }
 
-/// The base state of an odometry message: pose in its frame, twist turned from the child
-/// (base) frame into it. `None` when a value is not finite or the quaternion is zero.
+/// The base state of an odometry message: pose in its frame, twist (linear and angular)
+/// turned from the child (base) frame into it. `None` when a value is not finite or the
+/// quaternion is zero.
 pub fn base_state(msg: &Odometry) -> Option<BaseState> {
     let pose_w = geometry::isometry(&msg.pose.pose)?;
-    let v = msg.twist.twist.linear;
+    let (v, w) = (msg.twist.twist.linear, msg.twist.twist.angular);
     let v_b = Vector3::new(v.x, v.y, v.z);
-    if !v_b.iter().all(|x| x.is_finite()) {
+    let w_b = Vector3::new(w.x, w.y, w.z);
+    if !v_b.iter().chain(w_b.iter()).all(|x| x.is_finite()) {
         return None;
     }
     Some(BaseState {
         pose_w,
         linear_velocity_w: pose_w.rotation * v_b,
+        angular_velocity_w: pose_w.rotation * w_b,
     })
 }
 

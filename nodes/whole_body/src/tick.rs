@@ -16,6 +16,8 @@ pub struct BaseState {
     pub pose_w: Isometry3<f64>,
     /// The base's linear velocity [m/s] in `<robot>/odom`.
     pub linear_velocity_w: Vector3<f64>,
+    /// The base's angular velocity [rad/s] in `<robot>/odom` (the turn governor reads its z).
+    pub angular_velocity_w: Vector3<f64>,
 }
 
 /// One module's joints, in the module's actuator order.
@@ -181,6 +183,7 @@ mod tests {
         BaseState {
             pose_w: Isometry3::identity(),
             linear_velocity_w: Vector3::zeros(),
+            angular_velocity_w: Vector3::zeros(),
         }
     }
 

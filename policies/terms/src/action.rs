@@ -8,7 +8,9 @@
 //! frame (the frame the skill was trained in); a wheel's velocity is scaled by its limit, or by
 //! the policy's wheel bound where that is lower. Where the policy sets a wheel acceleration,
 //! the wheel commands follow the policy's through a [`WheelRamp`] (a rate limit whose state the
-//! caller keeps, as it keeps the previous action).
+//! caller keeps, as it keeps the previous action). Where the policy sets a lateral
+//! acceleration, a turn governor ([`turn_governor`]) first scales the wheel commands down
+//! while the base turns faster than that at its speed.
 
 use kumi_model::{ActuatorMode, ModuleInstance, RobotModel, Role};
 use kumi_policies::kinematics::ToolKinematics;
@@ -37,6 +39,11 @@ pub struct GoalBounds {
     /// policy's at this rate ([`WheelRamp`]); absent, it follows the policy at once.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wheel_acceleration_rad_s2: Option<f64>,
+    /// Largest lateral acceleration of a turn [m/s^2], the base's horizontal speed times its
+    /// yaw rate: above it every wheel command is scaled down to meet it ([`turn_governor`]);
+    /// absent, no governor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lateral_acceleration_m_s2: Option<f64>,
 }
 
 impl GoalBounds {
@@ -61,15 +68,18 @@ impl GoalBounds {
         WheelBounds {
             velocity_rad_s: self.wheel_velocity_rad_s,
             acceleration_rad_s2: self.wheel_acceleration_rad_s2,
+            lateral_acceleration_m_s2: self.lateral_acceleration_m_s2,
         }
     }
 }
 
-/// What bounds every wheel term of a policy (unset: the module's own limit, no ramp).
+/// What bounds every wheel term of a policy (unset: the module's own limit, no ramp, no
+/// governor).
 #[derive(Debug, Clone, Copy)]
 struct WheelBounds {
     velocity_rad_s: Option<f64>,
     acceleration_rad_s2: Option<f64>,
+    lateral_acceleration_m_s2: Option<f64>,
 }
 
 impl WheelBounds {
@@ -77,7 +87,8 @@ impl WheelBounds {
     fn check(&self) -> Result<(), TermError> {
         let positive = |name, bound: Option<f64>| bound.map_or(Ok(()), |v| check_positive(name, v));
         positive("wheel_velocity_rad_s", self.velocity_rad_s)?;
-        positive("wheel_acceleration_rad_s2", self.acceleration_rad_s2)
+        positive("wheel_acceleration_rad_s2", self.acceleration_rad_s2)?;
+        positive("lateral_acceleration_m_s2", self.lateral_acceleration_m_s2)
     }
 }
 
@@ -109,10 +120,12 @@ impl GoalBounds {
             leg_roll_rad: 0.0,
             wheel_velocity_rad_s: None,
             wheel_acceleration_rad_s2: None,
+            lateral_acceleration_m_s2: None,
         };
         let mut seen: Vec<(&str, f64, f64)> = Vec::new();
-        // Every wheel entry's acceleration (none, or one value for all: one bound made them).
-        let mut wheel_acceleration: Option<Option<f64>> = None;
+        // Every wheel entry's acceleration and governor (none, or one value for all: one bound
+        // made them).
+        let mut wheel_limits: Option<(Option<f64>, Option<f64>)> = None;
         for entry in description.split(';').filter(|e| !e.is_empty()) {
             let fields: Vec<&str> = entry.split(':').collect();
             let role = *fields
@@ -135,17 +148,37 @@ impl GoalBounds {
                 let largest = |old: Option<f64>, new: f64| Some(old.map_or(new, |v| v.max(new)));
                 let velocity = value(3, "velocity_rad_s")?;
                 bounds.wheel_velocity_rad_s = largest(bounds.wheel_velocity_rad_s, velocity);
-                let acceleration = match fields.len() > 4 {
-                    true => Some(value(4, "acceleration_rad_s2")?),
-                    false => None,
+                let keyed = |key: &str| -> Result<Option<f64>, TermError> {
+                    match fields[4..]
+                        .iter()
+                        .position(|f| f.split('=').next() == Some(key))
+                    {
+                        Some(i) => value(4 + i, key).map(Some),
+                        None => Ok(None),
+                    }
                 };
-                if wheel_acceleration.is_some_and(|a| a != acceleration) {
+                if let Some(unknown) = fields[4..].iter().find(|f| {
+                    !matches!(
+                        f.split('=').next(),
+                        Some("acceleration_rad_s2" | "lateral_acceleration_m_s2")
+                    )
+                }) {
+                    return Err(bad(format!("`{entry}`: unknown wheel bound `{unknown}`")));
+                }
+                let limits = (
+                    keyed("acceleration_rad_s2")?,
+                    keyed("lateral_acceleration_m_s2")?,
+                );
+                if wheel_limits.is_some_and(|l| l != limits) {
                     return Err(bad(format!(
                         "`{entry}`: wheel modules with different accelerations"
                     )));
                 }
-                wheel_acceleration = Some(acceleration);
-                bounds.wheel_acceleration_rad_s2 = acceleration;
+                wheel_limits = Some(limits);
+                (
+                    bounds.wheel_acceleration_rad_s2,
+                    bounds.lateral_acceleration_m_s2,
+                ) = limits;
                 continue;
             }
             let position = value(3, "position_m")?;
@@ -332,6 +365,9 @@ pub struct JointBounds {
     /// As [`GoalBounds::wheel_acceleration_rad_s2`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wheel_acceleration_rad_s2: Option<f64>,
+    /// As [`GoalBounds::lateral_acceleration_m_s2`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lateral_acceleration_m_s2: Option<f64>,
 }
 
 impl JointBounds {
@@ -344,6 +380,7 @@ impl JointBounds {
         WheelBounds {
             velocity_rad_s: self.wheel_velocity_rad_s,
             acceleration_rad_s2: self.wheel_acceleration_rad_s2,
+            lateral_acceleration_m_s2: self.lateral_acceleration_m_s2,
         }
     }
 }
@@ -359,6 +396,8 @@ pub struct WheelTerm {
     pub wheels: usize,
     /// Largest change of the commanded velocity [rad/s^2] ([`WheelRamp`]); none: no ramp.
     pub acceleration_rad_s2: Option<f64>,
+    /// The turn governor's lateral acceleration [m/s^2] ([`turn_governor`]); none: no governor.
+    pub lateral_acceleration_m_s2: Option<f64>,
 }
 
 impl WheelTerm {
@@ -462,6 +501,7 @@ impl ActionTerms {
                     scale_rad_s: limit,
                     wheels,
                     acceleration_rad_s2: wheel.acceleration_rad_s2,
+                    lateral_acceleration_m_s2: wheel.lateral_acceleration_m_s2,
                 }));
             } else if positions + wheels > 0 {
                 return Err(TermError::Module {
@@ -580,14 +620,55 @@ impl ActionTerms {
                     let ramp = t
                         .acceleration_rad_s2
                         .map_or(String::new(), |a| format!(":acceleration_rad_s2={a}"));
+                    let governor = t
+                        .lateral_acceleration_m_s2
+                        .map_or(String::new(), |a| format!(":lateral_acceleration_m_s2={a}"));
                     format!(
-                        "{}:wheel:1:velocity_rad_s={}{ramp}",
+                        "{}:wheel:1:velocity_rad_s={}{ramp}{governor}",
                         t.module, t.scale_rad_s
                     )
                 }
             })
             .collect::<Vec<_>>()
             .join(";")
+    }
+}
+
+/// The turn governor's scale for the wheel commands, in [0, 1]: 1 while the base's lateral
+/// acceleration in a turn, `|v_xy| |w_z|` (its horizontal speed [m/s] times its yaw rate
+/// [rad/s], no sideslip), is within `limit_m_s2`, else `limit / (|v_xy| |w_z|)`. Without a
+/// limit 1; a non-finite speed or yaw rate gives 0 (stop the wheels). Training, evaluation and
+/// the whole-body node scale every wheel module's command by it before the ramp.
+pub fn turn_governor(limit_m_s2: Option<f64>, speed_xy_m_s: f64, yaw_rate_rad_s: f64) -> f64 {
+    let Some(limit) = limit_m_s2 else {
+        return 1.0;
+    };
+    let lateral = speed_xy_m_s.abs() * yaw_rate_rad_s.abs();
+    if !lateral.is_finite() {
+        0.0
+    } else if lateral > limit {
+        limit / lateral
+    } else {
+        1.0
+    }
+}
+
+impl ActionTerms {
+    /// The turn governor's limit [m/s^2] of these terms (one for every wheel module; none
+    /// without wheels or a governor).
+    pub fn lateral_acceleration_m_s2(&self) -> Option<f64> {
+        self.wheels().find_map(|w| w.lateral_acceleration_m_s2)
+    }
+
+    /// Scales `wheel_velocities` [rad/s] (as [`Commands::wheel_velocities`]) by the turn
+    /// governor's scale for the base's horizontal speed [m/s] and yaw rate [rad/s].
+    pub fn govern(&self, wheel_velocities: &mut [f64], speed_xy_m_s: f64, yaw_rate_rad_s: f64) {
+        let scale = turn_governor(
+            self.lateral_acceleration_m_s2(),
+            speed_xy_m_s,
+            yaw_rate_rad_s,
+        );
+        wheel_velocities.iter_mut().for_each(|v| *v *= scale);
     }
 }
 

@@ -2,7 +2,7 @@
 
 use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel, Role};
 use kumi_policies::rotation::orientation_error;
-use kumi_terms::action::{ActionTerms, GoalBounds, JointBounds, Term, WheelRamp};
+use kumi_terms::action::{turn_governor, ActionTerms, GoalBounds, JointBounds, Term, WheelRamp};
 use kumi_terms::contract::{self, ContractMismatch};
 
 fn robot(name: &str) -> RobotModel {
@@ -17,6 +17,7 @@ const BOUNDS: GoalBounds = GoalBounds {
     leg_roll_rad: 0.4,
     wheel_velocity_rad_s: None,
     wheel_acceleration_rad_s2: None,
+    lateral_acceleration_m_s2: None,
 };
 
 #[test]
@@ -167,6 +168,7 @@ fn bounds_read_back_from_the_action_description() {
         leg_roll_rad: 0.3,
         wheel_velocity_rad_s: None,
         wheel_acceleration_rad_s2: None,
+        lateral_acceleration_m_s2: None,
     };
     for name in ["minimal", "dragon", "tricycle"] {
         let model = robot(name);
@@ -218,6 +220,7 @@ fn flat_terms_command_every_arm_joint_around_home_by_hand() {
             joint_scale_rad: 0.5,
             wheel_velocity_rad_s: None,
             wheel_acceleration_rad_s2: None,
+            lateral_acceleration_m_s2: None,
         },
     )
     .unwrap();
@@ -268,6 +271,7 @@ fn flat_terms_command_every_arm_joint_around_home_by_hand() {
                 joint_scale_rad: bad,
                 wheel_velocity_rad_s: None,
                 wheel_acceleration_rad_s2: None,
+                lateral_acceleration_m_s2: None,
             }
         )
         .is_err());
@@ -324,6 +328,7 @@ fn a_wheel_bound_scales_wheel_velocities_below_the_wheels_limit_and_reads_back()
             joint_scale_rad: 0.5,
             wheel_velocity_rad_s: Some(2.5),
             wheel_acceleration_rad_s2: None,
+            lateral_acceleration_m_s2: None,
         },
     )
     .unwrap();
@@ -345,6 +350,7 @@ fn a_wheel_bound_scales_wheel_velocities_below_the_wheels_limit_and_reads_back()
                 joint_scale_rad: 0.5,
                 wheel_velocity_rad_s: Some(bad),
                 wheel_acceleration_rad_s2: None,
+                lateral_acceleration_m_s2: None,
             }
         )
         .is_err());
@@ -432,6 +438,7 @@ fn a_wheel_acceleration_ramps_the_wheel_commands_and_reads_back() {
         joint_scale_rad: 0.5,
         wheel_velocity_rad_s: None,
         wheel_acceleration_rad_s2: Some(3.0),
+        lateral_acceleration_m_s2: None,
     };
     let flat_terms = ActionTerms::flat(&model, &flat).unwrap();
     assert!(flat_terms
@@ -455,5 +462,110 @@ fn a_wheel_acceleration_ramps_the_wheel_commands_and_reads_back() {
             ..flat
         };
         assert!(ActionTerms::flat(&model, &flat).is_err());
+    }
+}
+
+#[test]
+fn the_turn_governor_by_hand() {
+    // 0.5 m/s at 0.4 rad/s: 0.2 m/s^2 of lateral acceleration.
+    assert_eq!(turn_governor(None, 0.5, 0.4), 1.0);
+    assert_eq!(turn_governor(Some(0.2), 0.5, 0.3), 1.0);
+    assert!((turn_governor(Some(0.1), 0.5, 0.4) - 0.5).abs() < 1e-12);
+    // Either turning direction, either sign of speed.
+    assert!((turn_governor(Some(0.1), 0.5, -0.4) - 0.5).abs() < 1e-12);
+    assert!((turn_governor(Some(0.05), -1.0, 0.2) - 0.25).abs() < 1e-12);
+    // Turning in place and driving straight are never governed.
+    assert_eq!(turn_governor(Some(0.01), 0.0, 3.0), 1.0);
+    assert_eq!(turn_governor(Some(0.01), 2.0, 0.0), 1.0);
+    // A measurement that is not finite stops the wheels.
+    assert_eq!(turn_governor(Some(0.1), f64::NAN, 0.1), 0.0);
+    assert_eq!(turn_governor(Some(0.1), 1.0, f64::INFINITY), 0.0);
+}
+
+#[test]
+fn a_lateral_acceleration_governs_the_wheel_commands_and_reads_back() {
+    let model = robot("tricycle");
+    let governed = GoalBounds {
+        lateral_acceleration_m_s2: Some(0.1),
+        wheel_acceleration_rad_s2: Some(3.0),
+        ..BOUNDS
+    };
+    let terms = ActionTerms::new(&model, &governed).unwrap();
+    assert_eq!(terms.lateral_acceleration_m_s2(), Some(0.1));
+    let mut wheels = vec![2.0, -1.0, 0.5];
+    terms.govern(&mut wheels, 0.5, 0.4);
+    assert_eq!(wheels, [1.0, -0.5, 0.25]);
+    terms.govern(&mut wheels, 0.1, 0.4);
+    assert_eq!(wheels, [1.0, -0.5, 0.25]);
+    // Without a governor the commands pass through bit for bit.
+    let plain = ActionTerms::new(&model, &BOUNDS).unwrap();
+    assert_eq!(plain.lateral_acceleration_m_s2(), None);
+    let mut same = vec![2.0, -1.0, 0.5];
+    plain.govern(&mut same, 5.0, 5.0);
+    assert_eq!(same, [2.0, -1.0, 0.5]);
+    // The description carries it, after the ramp; it reads back, in either order.
+    let described = terms.describe();
+    assert!(
+        described.ends_with(":acceleration_rad_s2=3:lateral_acceleration_m_s2=0.1"),
+        "{described}"
+    );
+    let back = GoalBounds::from_description(&described).unwrap();
+    assert_eq!(back.lateral_acceleration_m_s2, Some(0.1));
+    assert_eq!(back.wheel_acceleration_rad_s2, Some(3.0));
+    assert_eq!(
+        ActionTerms::new(&model, &back).unwrap().describe(),
+        described
+    );
+    let swapped = described.replace(
+        ":acceleration_rad_s2=3:lateral_acceleration_m_s2=0.1",
+        ":lateral_acceleration_m_s2=0.1:acceleration_rad_s2=3",
+    );
+    assert_eq!(GoalBounds::from_description(&swapped).unwrap(), back);
+    let alone = GoalBounds {
+        lateral_acceleration_m_s2: Some(0.1),
+        ..BOUNDS
+    };
+    let alone_described = ActionTerms::new(&model, &alone).unwrap().describe();
+    let alone_back = GoalBounds::from_description(&alone_described).unwrap();
+    assert_eq!(alone_back.lateral_acceleration_m_s2, Some(0.1));
+    assert_eq!(alone_back.wheel_acceleration_rad_s2, None);
+    // Wheel entries that disagree, and unknown wheel bounds, are refused by name.
+    let differ = described.replacen(
+        "lateral_acceleration_m_s2=0.1",
+        "lateral_acceleration_m_s2=0.2",
+        1,
+    );
+    assert!(GoalBounds::from_description(&differ)
+        .unwrap_err()
+        .to_string()
+        .contains("different accelerations"));
+    let unknown = described.replace("lateral_acceleration_m_s2=0.1", "lateral=0.1");
+    assert!(GoalBounds::from_description(&unknown)
+        .unwrap_err()
+        .to_string()
+        .contains("unknown wheel bound `lateral=0.1`"));
+    // The flat baseline takes it too; one that is not positive is refused by name.
+    let flat = JointBounds {
+        joint_scale_rad: 0.5,
+        wheel_velocity_rad_s: None,
+        wheel_acceleration_rad_s2: None,
+        lateral_acceleration_m_s2: Some(0.1),
+    };
+    assert_eq!(
+        ActionTerms::flat(&model, &flat)
+            .unwrap()
+            .lateral_acceleration_m_s2(),
+        Some(0.1)
+    );
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let bounds = GoalBounds {
+            lateral_acceleration_m_s2: Some(bad),
+            ..BOUNDS
+        };
+        let err = ActionTerms::new(&model, &bounds).unwrap_err();
+        assert!(
+            err.to_string().contains("lateral_acceleration_m_s2"),
+            "{err}"
+        );
     }
 }
