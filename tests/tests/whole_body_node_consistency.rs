@@ -150,6 +150,25 @@ fn check(name: &str, engine: Engine, bounds: GoalBounds) {
     );
 }
 
+/// Odometry whose linear or angular twist is not finite is refused (the node logs it and acts
+/// on none of it): the turn governor reads the angular twist's yaw rate.
+#[test]
+fn odometry_with_a_twist_that_is_not_finite_is_refused() {
+    let model = model("tricycle");
+    let config = kumi_worlds::SimConfig::for_model(&model);
+    let world = kumi_worlds::build(Engine::Rapier, model.clone(), config).unwrap();
+    let odom = state::odometry(&*world, "tricycle", Time::from_seconds(1.0));
+    let read = kumi_whole_body_node::run::base_state;
+    assert!(read(&odom).is_some());
+    for bad in [f64::NAN, f64::INFINITY] {
+        let mut linear = odom.clone();
+        linear.twist.twist.linear.y = bad;
+        let mut angular = odom.clone();
+        angular.twist.twist.angular.z = bad;
+        assert!(read(&linear).is_none() && read(&angular).is_none(), "{bad}");
+    }
+}
+
 /// The simulator's velocity commands [rad/s] of every wheel joint, in actuator order.
 fn wheel_commands(world: &dyn kumi_worlds::SimWorld) -> Vec<f64> {
     let modes = world.servos().actuators().iter().map(|a| a.mode);

@@ -106,11 +106,11 @@ impl GoalBounds {
     /// ([`ActionTerms::describe`], the `kumi.action` metadata): a deployed node takes them from
     /// the policy file, not from a training config. Bounds of a role the robot lacks are 0; the
     /// wheel bound is the largest wheel velocity described (none without wheels; for a policy
-    /// trained without a bound, the wheels' own limit); the wheel acceleration is the one every
-    /// wheel entry names (none where none does; entries that differ are refused). The caller
-    /// still checks the whole
-    /// contract: terms built from these bounds must describe themselves exactly as the file
-    /// does.
+    /// trained without a bound, the wheels' own limit); the wheel acceleration and the turn
+    /// governor's lateral acceleration are the ones every wheel entry names, by key after the
+    /// velocity (none where none does; entries that differ, and unknown keys, are refused). The
+    /// caller still checks the whole contract: terms built from these bounds must describe
+    /// themselves exactly as the file does.
     pub fn from_description(description: &str) -> Result<Self, TermError> {
         let bad = |why: String| TermError::Description(why);
         let mut bounds = GoalBounds {
@@ -171,7 +171,7 @@ impl GoalBounds {
                 );
                 if wheel_limits.is_some_and(|l| l != limits) {
                     return Err(bad(format!(
-                        "`{entry}`: wheel modules with different accelerations"
+                        "`{entry}`: wheel modules with different wheel bounds"
                     )));
                 }
                 wheel_limits = Some(limits);

@@ -431,7 +431,7 @@ fn a_wheel_acceleration_ramps_the_wheel_commands_and_reads_back() {
     let some = described.replacen(":acceleration_rad_s2=3", "", 1);
     for bad in [differ, some] {
         let err = GoalBounds::from_description(&bad).unwrap_err();
-        assert!(err.to_string().contains("different accelerations"), "{err}");
+        assert!(err.to_string().contains("different wheel bounds"), "{err}");
     }
     // The flat baseline takes the same bound; one that is not positive is refused by name.
     let flat = JointBounds {
@@ -503,7 +503,8 @@ fn a_lateral_acceleration_governs_the_wheel_commands_and_reads_back() {
     let mut same = vec![2.0, -1.0, 0.5];
     plain.govern(&mut same, 5.0, 5.0);
     assert_eq!(same, [2.0, -1.0, 0.5]);
-    // The description carries it, after the ramp; it reads back, in either order.
+    // The description carries it, after the ramp; it reads back, in either order (the parser's;
+    // a node's contract check still wants the file's own text).
     let described = terms.describe();
     assert!(
         described.ends_with(":acceleration_rad_s2=3:lateral_acceleration_m_s2=0.1"),
@@ -538,7 +539,7 @@ fn a_lateral_acceleration_governs_the_wheel_commands_and_reads_back() {
     assert!(GoalBounds::from_description(&differ)
         .unwrap_err()
         .to_string()
-        .contains("different accelerations"));
+        .contains("different wheel bounds"));
     let unknown = described.replace("lateral_acceleration_m_s2=0.1", "lateral=0.1");
     assert!(GoalBounds::from_description(&unknown)
         .unwrap_err()
