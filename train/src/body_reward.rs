@@ -128,9 +128,10 @@ pub fn tilt_penalty(w_tilt: f64, tilt_rad: f64) -> f64 {
 
 /// `-w_turn (|v_xy| |w_z|)^2` for the base's horizontal speed `speed_xy_m_s` [m/s] and yaw
 /// rate `yaw_rate_rad_s` [rad/s]: the squared centripetal acceleration [m/s^2] of a base that
-/// drives along its heading while it turns.
+/// drives along its heading while it turns
+/// ([`kumi_terms::action::turn_lateral_acceleration`], which the turn governor bounds).
 pub fn turn_penalty(w_turn: f64, speed_xy_m_s: f64, yaw_rate_rad_s: f64) -> f64 {
-    -w_turn * (speed_xy_m_s * yaw_rate_rad_s).powi(2)
+    -w_turn * kumi_terms::action::turn_lateral_acceleration(speed_xy_m_s, yaw_rate_rad_s).powi(2)
 }
 
 /// Eq. 6: `-w_c` when an undesired arm contact occurs, else 0.

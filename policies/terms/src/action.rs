@@ -634,6 +634,13 @@ impl ActionTerms {
     }
 }
 
+/// The lateral (centripetal) acceleration [m/s^2] of a base that drives along its heading at
+/// `speed_xy_m_s` [m/s] while it turns at `yaw_rate_rad_s` [rad/s]: `|v_xy| |w_z|`. The turn
+/// governor bounds it; training's turn penalty squares it.
+pub fn turn_lateral_acceleration(speed_xy_m_s: f64, yaw_rate_rad_s: f64) -> f64 {
+    speed_xy_m_s.abs() * yaw_rate_rad_s.abs()
+}
+
 /// The turn governor's scale for the wheel commands, in [0, 1]: 1 while the base's lateral
 /// acceleration in a turn, `|v_xy| |w_z|` (its horizontal speed [m/s] times its yaw rate
 /// [rad/s], no sideslip), is within `limit_m_s2`, else `limit / (|v_xy| |w_z|)`. Without a
@@ -643,7 +650,7 @@ pub fn turn_governor(limit_m_s2: Option<f64>, speed_xy_m_s: f64, yaw_rate_rad_s:
     let Some(limit) = limit_m_s2 else {
         return 1.0;
     };
-    let lateral = speed_xy_m_s.abs() * yaw_rate_rad_s.abs();
+    let lateral = turn_lateral_acceleration(speed_xy_m_s, yaw_rate_rad_s);
     if !lateral.is_finite() {
         0.0
     } else if lateral > limit {
