@@ -735,42 +735,6 @@ mod tests {
         );
     }
 
-    #[test]
-    fn tricycles_governed_configs_add_only_the_turn_governor() {
-        // Stop 29's candidate (policies/candidates/tricycle_whole_body_governed.onnx): each stage
-        // is the shipped one with a turn governor of 0.1 m/s^2 and nothing else.
-        let dir =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../train/configs/whole_body");
-        for stage in ["tricycle", "tricycle_settle"] {
-            let read = |name: String| {
-                read_body_config(Some(&dir.join(name)), "tricycle", Variant::Hierarchical).unwrap()
-            };
-            let shipped = read(format!("{stage}.toml"));
-            let governed = read(format!(
-                "{}.toml",
-                stage.replace("tricycle", "tricycle_governed")
-            ));
-            let (Some(ArmControl::Skill(s)), Some(ArmControl::Skill(g))) =
-                (shipped.arms().ok(), governed.arms().ok())
-            else {
-                panic!("{stage}: over the skill")
-            };
-            assert_eq!(g.lateral_acceleration_m_s2, Some(0.1), "{stage}");
-            assert_eq!(
-                GoalBounds {
-                    lateral_acceleration_m_s2: None,
-                    ..g
-                },
-                s,
-                "{stage}"
-            );
-            assert_eq!(governed.ppo, shipped.ppo, "{stage}");
-            assert_eq!(governed.task, shipped.task, "{stage}");
-            assert_eq!(governed.reward, shipped.reward, "{stage}");
-            assert_eq!(governed.penalty, shipped.penalty, "{stage}");
-        }
-    }
-
     /// The manipulator tool's height [m] with the robot standing at home.
     fn standing_tool_height_m(robot: &str) -> f64 {
         let model = load_model(robot).unwrap();
