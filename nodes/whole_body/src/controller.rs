@@ -305,7 +305,7 @@ mod tests {
         )
     }
 
-    /// Tricycle's shipped goal bounds, no ramp, no governor.
+    /// Tricycle's shipped goal bounds without its turn governor (0.1 m/s^2 since stop 30), no ramp.
     const BOUNDS: GoalBounds = GoalBounds {
         manipulator_position_m: 0.25,
         manipulator_rotation_rad: 0.5,
