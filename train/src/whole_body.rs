@@ -17,7 +17,7 @@ use kumi_model::{ActuatorMode, RobotModel, Role};
 use kumi_policies::observation::{self as skill_obs, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy};
-use kumi_terms::action::{ActionTerms, GoalBounds, JointBounds, WheelRamp};
+use kumi_terms::action::{planar_twist, ActionTerms, GoalBounds, JointBounds, WheelRamp};
 use kumi_terms::observation::{self as body_obs, BodyState, Target, ToolChain};
 use kumi_worlds::{home_joint_positions, Engine, SimConfig, SimWorld};
 use nalgebra::{Isometry3, Vector3};
@@ -389,8 +389,7 @@ impl WholeBody {
         }
         let mut wheel_commands = commands.wheel_velocities;
         let (v_w, w_w) = self.world.base_twist_w();
-        self.terms
-            .govern(&mut wheel_commands, v_w.xy().norm(), w_w.z);
+        self.terms.govern(&mut wheel_commands, &v_w, &w_w);
         let wheel_velocities = self.wheel_ramp.follow(&wheel_commands);
         for (module, v) in self.wheel_modules.iter().zip(&wheel_velocities) {
             self.world
@@ -425,7 +424,8 @@ impl WholeBody {
         }
         if self.config.weights.turn != 0.0 {
             let (v_w, w_w) = self.world.base_twist_w();
-            terms.turn = turn_penalty(self.config.weights.turn, v_w.xy().norm(), w_w.z);
+            let (speed_xy_m_s, yaw_rate_rad_s) = planar_twist(&v_w, &w_w);
+            terms.turn = turn_penalty(self.config.weights.turn, speed_xy_m_s, yaw_rate_rad_s);
         }
         let terminated = self.world.diverged() || fell;
         BodyStep {

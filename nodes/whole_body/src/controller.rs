@@ -233,8 +233,8 @@ impl WholeBodyController {
         let base = &state.base;
         self.terms.govern(
             &mut wheel_velocities,
-            base.linear_velocity_w.xy().norm(),
-            base.angular_velocity_w.z,
+            &base.linear_velocity_w,
+            &base.angular_velocity_w,
         );
         Decision {
             goals: Some(goals),

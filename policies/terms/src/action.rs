@@ -641,6 +641,16 @@ pub fn turn_lateral_acceleration(speed_xy_m_s: f64, yaw_rate_rad_s: f64) -> f64 
     speed_xy_m_s.abs() * yaw_rate_rad_s.abs()
 }
 
+/// The base's horizontal speed [m/s] and yaw rate [rad/s] (`|v_xy|`, `w_z`) from its linear
+/// and angular velocity in a world frame with z up (the simulator's world, odometry's
+/// `<robot>/odom`): what the turn governor and training's turn penalty read.
+pub fn planar_twist(
+    linear_velocity_w: &Vector3<f64>,
+    angular_velocity_w: &Vector3<f64>,
+) -> (f64, f64) {
+    (linear_velocity_w.xy().norm(), angular_velocity_w.z)
+}
+
 /// The turn governor's scale for the wheel commands, in [0, 1]: 1 while the base's lateral
 /// acceleration in a turn, `|v_xy| |w_z|` (its horizontal speed [m/s] times its yaw rate
 /// [rad/s], no sideslip), is within `limit_m_s2`, else `limit / (|v_xy| |w_z|)`. Without a
@@ -668,8 +678,15 @@ impl ActionTerms {
     }
 
     /// Scales `wheel_velocities` [rad/s] (as [`Commands::wheel_velocities`]) by the turn
-    /// governor's scale for the base's horizontal speed [m/s] and yaw rate [rad/s].
-    pub fn govern(&self, wheel_velocities: &mut [f64], speed_xy_m_s: f64, yaw_rate_rad_s: f64) {
+    /// governor's scale for the base's linear [m/s] and angular [rad/s] velocity in a world
+    /// frame with z up ([`planar_twist`]).
+    pub fn govern(
+        &self,
+        wheel_velocities: &mut [f64],
+        linear_velocity_w: &Vector3<f64>,
+        angular_velocity_w: &Vector3<f64>,
+    ) {
+        let (speed_xy_m_s, yaw_rate_rad_s) = planar_twist(linear_velocity_w, angular_velocity_w);
         let scale = turn_governor(
             self.lateral_acceleration_m_s2(),
             speed_xy_m_s,

@@ -4,6 +4,7 @@ use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel, Role};
 use kumi_policies::rotation::orientation_error;
 use kumi_terms::action::{turn_governor, ActionTerms, GoalBounds, JointBounds, Term, WheelRamp};
 use kumi_terms::contract::{self, ContractMismatch};
+use nalgebra::Vector3;
 
 fn robot(name: &str) -> RobotModel {
     let library = ModuleLibrary::shipped();
@@ -493,15 +494,21 @@ fn a_lateral_acceleration_governs_the_wheel_commands_and_reads_back() {
     let terms = ActionTerms::new(&model, &governed).unwrap();
     assert_eq!(terms.lateral_acceleration_m_s2(), Some(0.1));
     let mut wheels = vec![2.0, -1.0, 0.5];
-    terms.govern(&mut wheels, 0.5, 0.4);
+    // 0.5 m/s horizontally (a vertical speed is not part of the turn) at 0.4 rad/s about z.
+    let turning = Vector3::new(0.0, 0.0, 0.4);
+    terms.govern(&mut wheels, &Vector3::new(0.5, 0.0, 9.0), &turning);
     assert_eq!(wheels, [1.0, -0.5, 0.25]);
-    terms.govern(&mut wheels, 0.1, 0.4);
+    terms.govern(&mut wheels, &Vector3::new(0.1, 0.0, 0.0), &turning);
     assert_eq!(wheels, [1.0, -0.5, 0.25]);
     // Without a governor the commands pass through bit for bit.
     let plain = ActionTerms::new(&model, &BOUNDS).unwrap();
     assert_eq!(plain.lateral_acceleration_m_s2(), None);
     let mut same = vec![2.0, -1.0, 0.5];
-    plain.govern(&mut same, 5.0, 5.0);
+    plain.govern(
+        &mut same,
+        &Vector3::new(5.0, 0.0, 0.0),
+        &Vector3::new(0.0, 0.0, 5.0),
+    );
     assert_eq!(same, [2.0, -1.0, 0.5]);
     // The description carries it, after the ramp; it reads back, in either order (the parser's;
     // a node's contract check still wants the file's own text).
