@@ -322,6 +322,10 @@ def goal_msg(values, frame=""):
     return msg
 
 
+RESEND_S = 0.1  # wall seconds between resends of a goal not yet acted on
+MOVED_M = 1e-3  # the tool moved this far [m]: its goal arrived
+
+
 def cmd_reach(args, peer):
     """Sends one goal to an arm node running against a lockstep bridge; reports the tool pose
     after --drive-seconds of simulated time."""
@@ -350,19 +354,29 @@ def cmd_reach(args, peer):
     start, wall = sim(), time.monotonic()
     target = [float(v) for v in args.goal.split(",")]
     p0 = peer.latest[ee_topic].pose.position
-    goal.publish(goal_msg(target, args.frame))
+    msg = goal_msg(target, args.frame)
+    goal.publish(msg)
+    # The publisher has matched the node's reader, but the node's reader may not yet have
+    # matched this writer (DDS discovery runs both ways at its own pace), and a sample sent in
+    # that gap is lost. Resend the same goal (the node takes it again, unchanged) every 0.1 s
+    # of wall time until the tool moves, which it does only once a goal arrived.
+    resend = {"at": time.monotonic() + RESEND_S, "sends": 1}
 
     def done():
+        p = peer.latest[ee_topic].pose.position
+        if math.dist([p.x, p.y, p.z], [p0.x, p0.y, p0.z]) < MOVED_M and time.monotonic() >= resend["at"]:
+            goal.publish(msg)
+            resend["at"] = time.monotonic() + RESEND_S
+            resend["sends"] += 1
         if sim() >= start + args.drive_seconds:
             return True
-        p = peer.latest[ee_topic].pose.position
         return args.within > 0 and math.dist([p.x, p.y, p.z], target[:3]) < args.within
 
     peer.spin_until(done, args.timeout)
     ee = peer.latest[ee_topic]
     p, o = ee.pose.position, ee.pose.orientation
     return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall, "start_position": [p0.x, p0.y, p0.z],
-            "position": [p.x, p.y, p.z],
+            "position": [p.x, p.y, p.z], "goal_sends": resend["sends"],
             "orientation": [o.w, o.x, o.y, o.z], "frame": ee.header.frame_id}
 
 
