@@ -358,8 +358,8 @@ def cmd_reach(args, peer):
     goal.publish(msg)
     # The publisher has matched the node's reader, but the node's reader may not yet have
     # matched this writer (DDS discovery runs both ways at its own pace), and a sample sent in
-    # that gap is lost. Resend the same goal (the node takes it again, unchanged) every 0.1 s
-    # of wall time until the tool moves, which it does only once a goal arrived.
+    # that gap is lost. Resend the same goal (the node takes it again, unchanged) every RESEND_S
+    # until the tool moves MOVED_M, which it does only once a goal arrived.
     resend = {"at": time.monotonic() + RESEND_S, "sends": 1}
 
     def done():
