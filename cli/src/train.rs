@@ -704,34 +704,52 @@ mod tests {
     }
 
     #[test]
-    fn tricycles_second_stage_config_changes_only_ppo() {
-        // The shipped policy is tricycle.toml resumed with tricycle_settle.toml: the task,
-        // reward and action bounds it trained on must stay the first stage's.
+    fn tricycles_later_stage_configs_change_only_the_steps_and_noise() {
+        // The shipped policy is tricycle.toml resumed with tricycle_settle.toml, then with
+        // tricycle_third.toml: the task, reward and action bounds it trained on must stay the
+        // first stage's, and each stage must go on where the one before it stopped.
         let first = read_body_config(None, "tricycle", Variant::Hierarchical).unwrap();
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../train/configs/whole_body/tricycle_settle.toml");
-        let second = read_body_config(Some(&path), "tricycle", Variant::Hierarchical).unwrap();
-        assert_eq!(second.task, first.task);
-        assert_eq!(second.reward, first.reward);
-        assert_eq!(second.action, first.action);
-        assert_eq!(second.penalty, first.penalty);
-        // It goes on where the first stage stopped, its noise falling from there.
-        assert!(second.ppo.total_steps > first.ppo.total_steps);
-        let start = second.ppo.total_steps as f64 * second.ppo.anneal_after;
+        let stage = |name: &str| {
+            let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../train/configs/whole_body")
+                .join(name);
+            read_body_config(Some(&path), "tricycle", Variant::Hierarchical).unwrap()
+        };
+        let second = stage("tricycle_settle.toml");
+        let third = stage("tricycle_third.toml");
+        for (before, after) in [(&first, &second), (&second, &third)] {
+            assert_eq!(after.task, first.task);
+            assert_eq!(after.reward, first.reward);
+            assert_eq!(after.action, first.action);
+            assert_eq!(after.penalty, first.penalty);
+            assert_stage_follows(&before.ppo, &after.ppo);
+        }
+    }
+
+    /// `after` resumes a run of `before`: more steps, its noise cap starting where `before`'s
+    /// ended and falling from there, every other PPO setting the same.
+    fn assert_stage_follows(before: &PpoConfig, after: &PpoConfig) {
+        assert!(after.total_steps > before.total_steps);
+        let start = after.total_steps as f64 * after.anneal_after;
         assert!(
-            (start - first.ppo.total_steps as f64).abs() < 4096.0,
+            (start - before.total_steps as f64).abs() < 4096.0,
             "{start}"
         );
-        let cap = second.ppo.log_std_cap(first.ppo.total_steps).unwrap();
-        assert!((cap - first.ppo.initial_log_std).abs() < 1e-3, "{cap}");
+        let ended = before
+            .log_std_cap(before.total_steps)
+            .unwrap_or(before.initial_log_std);
+        let cap = after.log_std_cap(before.total_steps).unwrap();
+        assert!((cap - ended).abs() < 1e-3, "{cap} against {ended}");
+        assert!(after.final_log_std.unwrap() < ended);
         assert_eq!(
             PpoConfig {
-                total_steps: first.ppo.total_steps,
-                anneal_after: first.ppo.anneal_after,
-                final_log_std: None,
-                ..second.ppo.clone()
+                total_steps: before.total_steps,
+                anneal_after: before.anneal_after,
+                initial_log_std: before.initial_log_std,
+                final_log_std: before.final_log_std,
+                ..after.clone()
             },
-            first.ppo
+            *before
         );
     }
 
