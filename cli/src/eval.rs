@@ -36,7 +36,8 @@ pub struct EvalBodyArgs {
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// The training config the policy was trained with (task and action bounds; default:
-    /// the shipped one for the robot and variant).
+    /// the one the shipped policy of the robot and variant finished its training with, e.g.
+    /// train/configs/whole_body/tricycle_fourth.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// The frozen skill (default: the shipped policies/arm_reach.onnx).
@@ -180,7 +181,11 @@ impl BodyEvaluations {
 pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
     anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
     let model = load_model(&args.morphology)?;
-    let file = crate::train::read_body_config(args.config.as_deref(), &model.name, args.variant)?;
+    let file = crate::train::read_shipped_policy_config(
+        args.config.as_deref(),
+        &model.name,
+        args.variant,
+    )?;
     let path = args
         .policy
         .clone()

@@ -250,18 +250,55 @@ impl TrainBodyConfig {
     }
 }
 
-/// The whole-body config at `path`, or the one shipped for `robot` and `variant`.
+/// The last stage of each shipped policy that trained in stages with other action terms than
+/// its first (the first stage is the robot's entry in [`SHIPPED_BODY_CONFIGS`], the default to
+/// train from): Tricycle's fourth stage tightens the turn governor.
+const SHIPPED_LAST_STAGES: [(&str, Variant, &str); 1] = [(
+    "tricycle",
+    Variant::Hierarchical,
+    include_str!("../../train/configs/whole_body/tricycle_fourth.toml"),
+)];
+
+/// The whole-body config at `path`, or the one shipped for `robot` and `variant` (the first
+/// stage: what `kumi train` starts from).
 pub fn read_body_config(
     path: Option<&std::path::Path>,
     robot: &str,
     variant: Variant,
+) -> Result<TrainBodyConfig> {
+    read_config_from(path, robot, variant, &SHIPPED_BODY_CONFIGS)
+}
+
+/// The whole-body config at `path`, or the one the shipped policy of `robot` and `variant`
+/// finished its training with (its last stage): what `kumi eval` and `kumi report compare`
+/// check the shipped policy against.
+pub fn read_shipped_policy_config(
+    path: Option<&std::path::Path>,
+    robot: &str,
+    variant: Variant,
+) -> Result<TrainBodyConfig> {
+    match SHIPPED_LAST_STAGES
+        .iter()
+        .find(|(name, v, _)| *name == robot && *v == variant)
+    {
+        Some(last) if path.is_none() => read_config_from(None, robot, variant, &[*last]),
+        _ => read_body_config(path, robot, variant),
+    }
+}
+
+/// The config at `path`, else `robot`'s entry for `variant` in `shipped`.
+fn read_config_from(
+    path: Option<&std::path::Path>,
+    robot: &str,
+    variant: Variant,
+    shipped: &[(&str, Variant, &str)],
 ) -> Result<TrainBodyConfig> {
     let (text, label) = match path {
         Some(path) => (
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?,
             path.display().to_string(),
         ),
-        None => match SHIPPED_BODY_CONFIGS
+        None => match shipped
             .iter()
             .find(|(name, v, _)| *name == robot && *v == variant)
         {
@@ -704,10 +741,11 @@ mod tests {
     }
 
     #[test]
-    fn tricycles_later_stage_configs_change_only_the_steps_and_noise() {
+    fn tricycles_later_stage_configs_change_only_the_steps_noise_and_governor() {
         // The shipped policy is tricycle.toml resumed with tricycle_settle.toml, then with
-        // tricycle_third.toml: the task, reward and action bounds it trained on must stay the
-        // first stage's, and each stage must go on where the one before it stopped.
+        // tricycle_third.toml, then with tricycle_fourth.toml: the task and reward it trained on
+        // must stay the first stage's, its action bounds too but for the fourth stage's tighter
+        // turn governor, and each stage must go on where the one before it stopped.
         let first = read_body_config(None, "tricycle", Variant::Hierarchical).unwrap();
         let stage = |name: &str| {
             let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -717,17 +755,42 @@ mod tests {
         };
         let second = stage("tricycle_settle.toml");
         let third = stage("tricycle_third.toml");
-        for (before, after) in [(&first, &second), (&second, &third)] {
+        let fourth = stage("tricycle_fourth.toml");
+        for (before, after) in [(&first, &second), (&second, &third), (&third, &fourth)] {
             assert_eq!(after.task, first.task);
             assert_eq!(after.reward, first.reward);
-            assert_eq!(after.action, first.action);
             assert_eq!(after.penalty, first.penalty);
             assert_stage_follows(&before.ppo, &after.ppo);
+        }
+        assert_eq!(second.action, first.action);
+        assert_eq!(third.action, first.action);
+        let (first_bounds, fourth_bounds) = (first.action.unwrap(), fourth.action.unwrap());
+        assert_eq!(fourth_bounds.lateral_acceleration_m_s2, Some(0.07));
+        assert_eq!(
+            GoalBounds {
+                lateral_acceleration_m_s2: first_bounds.lateral_acceleration_m_s2,
+                ..fourth_bounds
+            },
+            first_bounds
+        );
+        // What eval checks the shipped policy against by default is its last stage; training
+        // starts from the first.
+        let shipped = read_shipped_policy_config(None, "tricycle", Variant::Hierarchical).unwrap();
+        assert_eq!(shipped.action, fourth.action);
+        assert_eq!(shipped.ppo, fourth.ppo);
+        for (robot, variant, _) in SHIPPED_BODY_CONFIGS {
+            if (robot, variant) != ("tricycle", Variant::Hierarchical) {
+                let (a, b) = (
+                    read_shipped_policy_config(None, robot, variant).unwrap(),
+                    read_body_config(None, robot, variant).unwrap(),
+                );
+                assert_eq!((a.ppo, a.action, a.flat), (b.ppo, b.action, b.flat));
+            }
         }
     }
 
     /// `after` resumes a run of `before`: more steps, its noise cap starting where `before`'s
-    /// ended and falling from there, every other PPO setting the same.
+    /// ended and not rising from there, every other PPO setting the same.
     fn assert_stage_follows(before: &PpoConfig, after: &PpoConfig) {
         assert!(after.total_steps > before.total_steps);
         let start = after.total_steps as f64 * after.anneal_after;
@@ -740,7 +803,7 @@ mod tests {
             .unwrap_or(before.initial_log_std);
         let cap = after.log_std_cap(before.total_steps).unwrap();
         assert!((cap - ended).abs() < 1e-3, "{cap} against {ended}");
-        assert!(after.final_log_std.unwrap() < ended);
+        assert!(after.final_log_std.unwrap() <= ended);
         assert_eq!(
             PpoConfig {
                 total_steps: before.total_steps,

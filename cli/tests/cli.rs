@@ -614,6 +614,81 @@ mod mujoco {
             (Some("rapier"), Some("mujoco"))
         );
     }
+
+    #[test]
+    fn eval_checks_the_shipped_tricycle_against_its_last_stage_by_default() {
+        // Its fourth stage tightened the turn governor: the first stage's config (what
+        // `kumi train` starts from) describes other action terms than the shipped file, and
+        // is refused with the key named; without --config eval takes the last stage's.
+        let v: serde_json::Value = kumi_json(&[
+            "eval",
+            "whole-body",
+            "tricycle",
+            "--rollouts",
+            "1",
+            "--backend",
+            "tract",
+            "--engine",
+            "mujoco",
+            "--json",
+        ]);
+        assert_eq!(v["rollouts"], 1);
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let first = root.join("train/configs/whole_body/tricycle.toml");
+        let out = super::kumi(&[
+            "eval",
+            "whole-body",
+            "tricycle",
+            "--config",
+            first.to_str().unwrap(),
+            "--rollouts",
+            "1",
+            "--backend",
+            "tract",
+            "--engine",
+            "mujoco",
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{stderr}");
+        assert!(
+            stderr.contains("kumi.action") && stderr.contains("lateral_acceleration_m_s2=0.07"),
+            "{stderr}"
+        );
+    }
+
+    #[test]
+    fn the_shipped_tricycle_checkpoint_exports_the_shipped_policy() {
+        // policies/checkpoints/tricycle_whole_body is the training state of the shipped policy
+        // after its last stage. Resumed with that stage's config it has no step left to train
+        // and exports the shipped file byte for byte: a later stage goes on from the shipped
+        // policy itself, not from a retrained copy.
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let out_dir = std::env::temp_dir().join(format!("kumi-ckpt-{}", std::process::id()));
+        let path = |p: &str| root.join(p).to_str().unwrap().to_string();
+        let out = super::kumi(&[
+            "train",
+            "whole-body",
+            "tricycle",
+            "--config",
+            &path("train/configs/whole_body/tricycle_fourth.toml"),
+            "--resume",
+            &path("policies/checkpoints/tricycle_whole_body"),
+            "--out",
+            out_dir.to_str().unwrap(),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let exported = std::fs::read(out_dir.join("tricycle_whole_body.onnx")).unwrap();
+        let shipped = std::fs::read(root.join("policies/tricycle_whole_body.onnx")).unwrap();
+        std::fs::remove_dir_all(&out_dir).unwrap();
+        assert!(
+            exported == shipped,
+            "the checkpoint exports another policy than policies/tricycle_whole_body.onnx"
+        );
+    }
 }
 
 #[test]

@@ -346,6 +346,7 @@ pub fn whole_body_config(
             fall: 0.0,
             tilt: 0.0,
             turn: 0.0,
+            rock: 0.0,
         },
         penalty: Default::default(),
         arms: kumi_train::whole_body::ArmControl::Skill(bounds),

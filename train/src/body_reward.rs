@@ -41,6 +41,13 @@ pub struct BodyWeights {
     /// config: 0, and left out of the serialised config like `fall`.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub turn: f64,
+    /// Rocking penalty `-rock * (w_x^2 + w_y^2)` per step [1/(rad/s)^2]: the base's roll and
+    /// pitch rates [rad/s], its angular velocity about its own x and y axes (Isaac Lab's
+    /// `ang_vel_xy_l2`; kumi's, the paper has none). Tricycle rocks on two wheels for seconds
+    /// before it falls. Absent in a config: 0, and left out of the serialised config like
+    /// `fall`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub rock: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -79,6 +86,8 @@ pub struct BodyTerms {
     pub tilt: f64,
     /// The turn penalty.
     pub turn: f64,
+    /// The rocking penalty.
+    pub rock: f64,
     /// Eq. 5 (penalty baseline only).
     pub leg_orientation: f64,
     /// Eq. 6 (penalty baseline only).
@@ -96,6 +105,7 @@ impl BodyTerms {
             + self.fall
             + self.tilt
             + self.turn
+            + self.rock
             + self.leg_orientation
             + self.contact
     }
@@ -132,6 +142,12 @@ pub fn tilt_penalty(w_tilt: f64, tilt_rad: f64) -> f64 {
 /// ([`kumi_terms::action::turn_lateral_acceleration`], which the turn governor bounds).
 pub fn turn_penalty(w_turn: f64, speed_xy_m_s: f64, yaw_rate_rad_s: f64) -> f64 {
     -w_turn * kumi_terms::action::turn_lateral_acceleration(speed_xy_m_s, yaw_rate_rad_s).powi(2)
+}
+
+/// `-w_rock (w_x^2 + w_y^2)` for the base's angular velocity `angular_velocity_b` [rad/s] in
+/// its own frame: its roll and pitch rates, not its yaw rate (driving turns the base about z).
+pub fn rock_penalty(w_rock: f64, angular_velocity_b: &nalgebra::Vector3<f64>) -> f64 {
+    -w_rock * angular_velocity_b.xy().norm_squared()
 }
 
 /// Eq. 6: `-w_c` when an undesired arm contact occurs, else 0.
@@ -187,6 +203,7 @@ mod tests {
         fall: 0.0,
         tilt: 0.0,
         turn: 0.0,
+        rock: 0.0,
     };
 
     #[test]
@@ -275,5 +292,29 @@ mod tests {
         assert!(serde_json::to_string(&with)
             .unwrap()
             .contains("\"turn\":2.0"));
+    }
+    #[test]
+    fn the_rock_penalty_by_hand() {
+        // Rolling at 0.3 rad/s and pitching at -0.4 rad/s: 0.09 + 0.16 = 0.25, times 2. The
+        // yaw rate costs nothing: driving turns the base about its z axis.
+        let w = |x, y, z| nalgebra::Vector3::new(x, y, z);
+        assert!((rock_penalty(2.0, &w(0.3, -0.4, 0.0)) + 0.5).abs() < 1e-12);
+        assert_eq!(
+            rock_penalty(2.0, &w(0.3, -0.4, 5.0)),
+            rock_penalty(2.0, &w(0.3, -0.4, 0.0))
+        );
+        assert_eq!(rock_penalty(2.0, &w(0.0, 0.0, 1.0)), 0.0);
+        let t = BodyTerms {
+            alive: 0.5,
+            rock: -0.5,
+            ..BodyTerms::default()
+        };
+        assert_eq!(t.total(), 0.0);
+        // Unset, it stays out of the serialised weights: older configs keep their fingerprints.
+        assert!(!serde_json::to_string(&W).unwrap().contains("rock"));
+        let with = BodyWeights { rock: 2.0, ..W };
+        assert!(serde_json::to_string(&with)
+            .unwrap()
+            .contains("\"rock\":2.0"));
     }
 }

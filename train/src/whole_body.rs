@@ -26,8 +26,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::arm_reach::EnvError;
 use crate::body_reward::{
-    body_terms, contact_penalty, fall_penalty, fallen, leg_orientation_reward, tilt, tilt_penalty,
-    turn_penalty, BodyTerms, BodyWeights, PenaltyWeights,
+    body_terms, contact_penalty, fall_penalty, fallen, leg_orientation_reward, rock_penalty, tilt,
+    tilt_penalty, turn_penalty, BodyTerms, BodyWeights, PenaltyWeights,
 };
 use crate::evaluate_body::{leg_angles, ContactRule};
 
@@ -426,6 +426,11 @@ impl WholeBody {
             let (v_w, w_w) = self.world.base_twist_w();
             let (speed_xy_m_s, yaw_rate_rad_s) = planar_twist(&v_w, &w_w);
             terms.turn = turn_penalty(self.config.weights.turn, speed_xy_m_s, yaw_rate_rad_s);
+        }
+        if self.config.weights.rock != 0.0 {
+            let (_, w_w) = self.world.base_twist_w();
+            let w_b = self.world.base_pose().rotation.inverse() * w_w;
+            terms.rock = rock_penalty(self.config.weights.rock, &w_b);
         }
         let terminated = self.world.diverged() || fell;
         BodyStep {

@@ -7,7 +7,7 @@ use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
 use kumi_policies::observation::{self, Goal};
 use kumi_terms::action::{GoalBounds, JointBounds};
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig};
-use kumi_train::body_reward::{turn_penalty, BodyWeights, PenaltyWeights};
+use kumi_train::body_reward::{rock_penalty, turn_penalty, BodyWeights, PenaltyWeights};
 use kumi_train::whole_body::{ArmControl, TaskConfig, WholeBody, WholeBodyConfig};
 use kumi_worlds::{default_training_engine, home_joint_positions, RobotState};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -44,6 +44,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             fall: 0.0,
             tilt: 0.0,
             turn: 0.0,
+            rock: 0.0,
         },
         penalty: PenaltyWeights::default(),
         arms: ArmControl::Skill(GoalBounds {
@@ -289,6 +290,38 @@ fn the_turn_penalty_follows_the_bases_speed_and_yaw_rate() {
         paid < -1e-4,
         "a driving, steering robot turned for nothing: {paid}"
     );
+}
+
+#[test]
+fn the_rock_penalty_follows_the_bases_roll_and_pitch_rates() {
+    // Unweighted, no step carries it; weighted, each step carries the rule's value for the
+    // base's angular velocity in its own frame after that step, and a robot that lurches off
+    // with its legs' goals thrown pays it.
+    let mut weighted = config(1.5);
+    weighted.weights.rock = 2.0;
+    let action = [0.6_f32; 21];
+    let mut plain = WholeBody::new(model("tricycle"), config(1.5), &skill(), 5).unwrap();
+    let mut env = WholeBody::new(model("tricycle"), weighted, &skill(), 5).unwrap();
+    plain.reset();
+    env.reset();
+    let mut paid = 0.0;
+    for _ in 0..30 {
+        let unweighted = plain.step(&action);
+        assert_eq!(unweighted.terms.rock, 0.0);
+        let step = env.step(&action);
+        let (_, w_w) = env.world().base_twist_w();
+        let w_b = env.world().base_pose().rotation.inverse() * w_w;
+        assert_eq!(step.terms.rock, rock_penalty(2.0, &w_b));
+        assert!(
+            (step.reward - unweighted.reward - step.terms.rock).abs() < 1e-12,
+            "{} - {} is not the rock term {}",
+            step.reward,
+            unweighted.reward,
+            step.terms.rock
+        );
+        paid += step.terms.rock;
+    }
+    assert!(paid < -1e-4, "the base never rocked: {paid}");
 }
 
 #[test]
