@@ -257,12 +257,17 @@ fn a_tilt_past_the_limit_terminates() {
     assert_eq!(step.terms.fall, 0.0);
 }
 
-#[test]
-fn the_turn_penalty_follows_the_bases_speed_and_yaw_rate() {
-    // Unweighted, no step carries it; weighted, each step carries the rule's value for the
-    // base's twist after that step, and a robot that drives while its legs steer pays it.
+/// Runs Tricycle twice from the same seed with the same actions, once with `weigh` applied to
+/// the reward weights: unweighted no step carries the term (`term` of the step's terms);
+/// weighted each step carries `expected` of the world after that step, the rewards differ by
+/// the term alone (the same physics), and the robot pays something over 30 steps.
+fn assert_a_term_follows_the_world(
+    weigh: impl Fn(&mut BodyWeights),
+    term: impl Fn(&kumi_train::body_reward::BodyTerms) -> f64,
+    expected: impl Fn(&WholeBody) -> f64,
+) {
     let mut weighted = config(1.5);
-    weighted.weights.turn = 2.0;
+    weigh(&mut weighted.weights);
     let action = [0.6_f32; 21];
     let mut plain = WholeBody::new(model("tricycle"), config(1.5), &skill(), 5).unwrap();
     let mut env = WholeBody::new(model("tricycle"), weighted, &skill(), 5).unwrap();
@@ -271,57 +276,46 @@ fn the_turn_penalty_follows_the_bases_speed_and_yaw_rate() {
     let mut paid = 0.0;
     for _ in 0..30 {
         let unweighted = plain.step(&action);
-        assert_eq!(unweighted.terms.turn, 0.0);
+        assert_eq!(term(&unweighted.terms), 0.0);
         let step = env.step(&action);
-        let (v_w, w_w) = env.world().base_twist_w();
-        let expected = turn_penalty(2.0, v_w.xy().norm(), w_w.z);
-        assert_eq!(step.terms.turn, expected);
-        // The same seed and actions give the same physics: the rewards differ by the term alone.
+        let value = term(&step.terms);
+        assert_eq!(value, expected(&env));
         assert!(
-            (step.reward - unweighted.reward - step.terms.turn).abs() < 1e-12,
-            "{} - {} is not the turn term {}",
+            (step.reward - unweighted.reward - value).abs() < 1e-12,
+            "{} - {} is not the term {value}",
             step.reward,
             unweighted.reward,
-            step.terms.turn
         );
-        paid += step.terms.turn;
+        paid += value;
     }
-    assert!(
-        paid < -1e-4,
-        "a driving, steering robot turned for nothing: {paid}"
+    assert!(paid < -1e-4, "the term cost nothing over 30 steps: {paid}");
+}
+
+#[test]
+fn the_turn_penalty_follows_the_bases_speed_and_yaw_rate() {
+    // A robot that drives while its legs steer pays it.
+    assert_a_term_follows_the_world(
+        |w| w.turn = 2.0,
+        |t| t.turn,
+        |env| {
+            let (v_w, w_w) = env.world().base_twist_w();
+            turn_penalty(2.0, v_w.xy().norm(), w_w.z)
+        },
     );
 }
 
 #[test]
 fn the_rock_penalty_follows_the_bases_roll_and_pitch_rates() {
-    // Unweighted, no step carries it; weighted, each step carries the rule's value for the
-    // base's angular velocity in its own frame after that step, and a robot that lurches off
-    // with its legs' goals thrown pays it.
-    let mut weighted = config(1.5);
-    weighted.weights.rock = 2.0;
-    let action = [0.6_f32; 21];
-    let mut plain = WholeBody::new(model("tricycle"), config(1.5), &skill(), 5).unwrap();
-    let mut env = WholeBody::new(model("tricycle"), weighted, &skill(), 5).unwrap();
-    plain.reset();
-    env.reset();
-    let mut paid = 0.0;
-    for _ in 0..30 {
-        let unweighted = plain.step(&action);
-        assert_eq!(unweighted.terms.rock, 0.0);
-        let step = env.step(&action);
-        let (_, w_w) = env.world().base_twist_w();
-        let w_b = env.world().base_pose().rotation.inverse() * w_w;
-        assert_eq!(step.terms.rock, rock_penalty(2.0, &w_b));
-        assert!(
-            (step.reward - unweighted.reward - step.terms.rock).abs() < 1e-12,
-            "{} - {} is not the rock term {}",
-            step.reward,
-            unweighted.reward,
-            step.terms.rock
-        );
-        paid += step.terms.rock;
-    }
-    assert!(paid < -1e-4, "the base never rocked: {paid}");
+    // The base's angular velocity in its own frame; a robot that lurches off with its legs'
+    // goals thrown pays it.
+    assert_a_term_follows_the_world(
+        |w| w.rock = 2.0,
+        |t| t.rock,
+        |env| {
+            let (_, w_w) = env.world().base_twist_w();
+            rock_penalty(2.0, &(env.world().base_pose().rotation.inverse() * w_w))
+        },
+    );
 }
 
 #[test]
