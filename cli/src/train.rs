@@ -266,7 +266,7 @@ pub fn read_body_config(
     robot: &str,
     variant: Variant,
 ) -> Result<TrainBodyConfig> {
-    read_config_from(path, robot, variant, &SHIPPED_BODY_CONFIGS)
+    read_config_from(path, robot, variant, SHIPPED_BODY_CONFIGS.iter())
 }
 
 /// The whole-body config at `path`, or the one the shipped policy of `robot` and `variant`
@@ -277,31 +277,23 @@ pub fn read_shipped_policy_config(
     robot: &str,
     variant: Variant,
 ) -> Result<TrainBodyConfig> {
-    match SHIPPED_LAST_STAGES
-        .iter()
-        .find(|(name, v, _)| *name == robot && *v == variant)
-    {
-        Some(last) if path.is_none() => read_config_from(None, robot, variant, &[*last]),
-        _ => read_body_config(path, robot, variant),
-    }
+    let last_first = SHIPPED_LAST_STAGES.iter().chain(&SHIPPED_BODY_CONFIGS);
+    read_config_from(path, robot, variant, last_first)
 }
 
-/// The config at `path`, else `robot`'s entry for `variant` in `shipped`.
-fn read_config_from(
+/// The config at `path`, else the first entry for `robot` and `variant` in `shipped`.
+fn read_config_from<'a>(
     path: Option<&std::path::Path>,
     robot: &str,
     variant: Variant,
-    shipped: &[(&str, Variant, &str)],
+    mut shipped: impl Iterator<Item = &'a (&'a str, Variant, &'a str)>,
 ) -> Result<TrainBodyConfig> {
     let (text, label) = match path {
         Some(path) => (
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?,
             path.display().to_string(),
         ),
-        None => match shipped
-            .iter()
-            .find(|(name, v, _)| *name == robot && *v == variant)
-        {
+        None => match shipped.find(|(name, v, _)| *name == robot && *v == variant) {
             Some((_, _, text)) => (text.to_string(), format!("the shipped {variant} config for {robot}")),
             None => bail!(
                 "no shipped {variant} whole-body config for robot `{robot}`: pass --config FILE (start from train/configs/{}/tricycle.toml)",
