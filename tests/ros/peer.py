@@ -6,6 +6,7 @@ Run with ROS_DOMAIN_ID set to the domain of the node under test.
 """
 
 import argparse
+import faulthandler
 import json
 import math
 import os
@@ -914,22 +915,33 @@ def main():
         leave(peer, status=1)
         raise
     # The result is out before rclpy shuts down, so that a shutdown that hangs cannot hold it
-    # back (a fake limb once ran past its deadline on CI; the notes above now say where).
+    # back: the tests keep a result announced by RESULT_OUT whatever the teardown does after it.
     print(json.dumps(out))
     sys.stdout.flush()
+    note(RESULT_OUT)
     leave(peer, status=0)
+
+
+# Said on stderr once the result is printed and flushed (tests/src/lib.rs reads it).
+RESULT_OUT = "result out"
 
 
 def leave(peer, status, within_s=10.0):
     """Destroys the node and shuts rclpy down; if that hangs past `within_s`, says so and exits
-    with `status` (the command's own: 0 after a result, 1 after an exception)."""
+    with `status` (the command's own: 0 after a result, 1 after an exception).
+
+    The timer needs the GIL, which a teardown stuck in rclpy's C code can hold: on CI a fake limb
+    said nothing after "done" for a minute. faulthandler's watchdog is a C thread that needs no
+    GIL: 5 s later it prints every thread's stack to stderr and exits with status 1."""
     watchdog = threading.Timer(within_s, lambda: (note(f"rclpy shutdown hung {within_s} s; leaving"), os._exit(status)))
     watchdog.daemon = True
     watchdog.start()
+    faulthandler.dump_traceback_later(within_s + 5.0, exit=True)
     peer.destroy_node()
     note("node destroyed")
     rclpy.try_shutdown()
     note("rclpy shut down")
+    faulthandler.cancel_dump_traceback_later()
     watchdog.cancel()
 
 
