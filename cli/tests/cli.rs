@@ -617,7 +617,7 @@ mod mujoco {
 
     #[test]
     fn eval_checks_the_shipped_tricycle_against_its_last_stage_by_default() {
-        // Its fourth stage tightened the turn governor: the first stage's config (what
+        // Its fourth stage tightened the turn governor (its fifth kept it): the first stage's config (what
         // `kumi train` starts from) describes other action terms than the shipped file, and
         // is refused with the key named; without --config eval takes the last stage's.
         let v: serde_json::Value = kumi_json(&[
@@ -670,7 +670,7 @@ mod mujoco {
             "whole-body",
             "tricycle",
             "--config",
-            &path("train/configs/whole_body/tricycle_fourth.toml"),
+            &path("train/configs/whole_body/tricycle_fifth.toml"),
             "--resume",
             &path("policies/checkpoints/tricycle_whole_body"),
             "--out",
