@@ -10,16 +10,20 @@ fn kumi(args: &[&str]) -> Output {
         .expect("kumi runs")
 }
 
-/// Runs `kumi`, which must succeed (its stderr is the failure message), and parses its stdout
-/// as JSON.
-fn kumi_json<T: serde::de::DeserializeOwned>(args: &[&str]) -> T {
+/// Runs `kumi`, which must succeed (its stderr is the failure message).
+fn kumi_ok(args: &[&str]) -> Output {
     let out = kumi(args);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    serde_json::from_slice(&out.stdout).unwrap()
+    out
+}
+
+/// Runs `kumi`, which must succeed, and parses its stdout as JSON.
+fn kumi_json<T: serde::de::DeserializeOwned>(args: &[&str]) -> T {
+    serde_json::from_slice(&kumi_ok(args).stdout).unwrap()
 }
 
 #[test]
@@ -171,7 +175,7 @@ fn bench_sim_json_has_the_documented_records() {
 #[test]
 fn train_arm_runs_the_shipped_config_and_writes_metrics() {
     let out_dir = std::env::temp_dir().join(format!("kumi-train-{}", std::process::id()));
-    let out = kumi(&[
+    let out = kumi_ok(&[
         "train",
         "arm",
         "--steps",
@@ -179,11 +183,6 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
         "--out",
         out_dir.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let csv = std::fs::read_to_string(out_dir.join("metrics.csv")).unwrap();
     assert!(out_dir.join("checkpoint/params.safetensors").exists());
     let onnx = std::fs::read(out_dir.join("arm_reach.onnx")).unwrap();
@@ -192,7 +191,7 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
         "a 21-256-128-7 actor is about 160 kB of weights"
     );
     // Resuming continues the step count.
-    let resumed = kumi(&[
+    kumi_ok(&[
         "train",
         "arm",
         "--steps",
@@ -202,11 +201,6 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
         "--out",
         out_dir.join("more").to_str().unwrap(),
     ]);
-    assert!(
-        resumed.status.success(),
-        "{}",
-        String::from_utf8_lossy(&resumed.stderr)
-    );
     let more = std::fs::read_to_string(out_dir.join("more/metrics.csv")).unwrap();
     assert!(
         more.lines().nth(1).unwrap().starts_with("2,8192,"),
@@ -539,12 +533,7 @@ fn an_unknown_engine_is_refused_with_the_known_ones() {
 
 #[test]
 fn urdf_mjcf_prints_the_mujoco_model() {
-    let out = kumi(&["urdf", "minimal", "--mjcf"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = kumi_ok(&["urdf", "minimal", "--mjcf"]);
     let xml = String::from_utf8_lossy(&out.stdout);
     assert!(xml.starts_with("<mujoco model=\"minimal\">"), "{xml}");
     assert!(
@@ -665,7 +654,7 @@ mod mujoco {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
         let out_dir = std::env::temp_dir().join(format!("kumi-ckpt-{}", std::process::id()));
         let path = |p: &str| root.join(p).to_str().unwrap().to_string();
-        let out = super::kumi(&[
+        super::kumi_ok(&[
             "train",
             "whole-body",
             "tricycle",
@@ -676,11 +665,6 @@ mod mujoco {
             "--out",
             out_dir.to_str().unwrap(),
         ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
         let exported = std::fs::read(out_dir.join("tricycle_whole_body.onnx")).unwrap();
         let shipped = std::fs::read(root.join("policies/tricycle_whole_body.onnx")).unwrap();
         std::fs::remove_dir_all(&out_dir).unwrap();
