@@ -297,19 +297,29 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         (end - rows[1][4].parse::<f64>().unwrap()).abs() < 1e-3,
         "{trace}"
     );
-    // The base's tilt and the action that led to each step: Minimal's 7 values, by name,
-    // empty at the start.
+    // The base's tilt, the links on the ground and the action that led to each step:
+    // Minimal's 7 values, by name, empty at the start.
     let header: Vec<&str> = lines[0].split(',').collect();
-    assert_eq!(header[16], "tilt_rad");
-    assert_eq!(header.len(), 17 + 7, "{}", lines[0]);
-    assert!(header[17..].iter().all(|h| h.starts_with("action:")));
+    assert_eq!(header[16..18], ["tilt_rad", "ground_links"]);
+    assert_eq!(header.len(), 18 + 7, "{}", lines[0]);
+    assert!(header[18..].iter().all(|h| h.starts_with("action:")));
     assert!(header.contains(&"action:wheel0/velocity"), "{}", lines[0]);
     let cells = |line: &str| -> Vec<String> { line.split(',').map(String::from).collect() };
     assert!(lines[1..].iter().all(|l| cells(l).len() == header.len()));
-    assert!(cells(lines[1])[17..].iter().all(String::is_empty));
-    assert!(cells(lines[2])[16..]
-        .iter()
-        .all(|c| c.parse::<f64>().is_ok_and(f64::is_finite)));
+    assert!(cells(lines[1])[18..].iter().all(String::is_empty));
+    let numeric = |c: &String| c.parse::<f64>().is_ok_and(f64::is_finite);
+    assert!(numeric(&cells(lines[2])[16]) && cells(lines[2])[18..].iter().all(numeric));
+    // Minimal stands on its wheel module's wheels (and skids): the links on the ground are
+    // named, sorted, each once, and its wheels are among them.
+    let grounds: Vec<String> = lines[1..].iter().map(|l| cells(l)[17].clone()).collect();
+    for links in &grounds {
+        let names: Vec<&str> = links.split('|').filter(|n| !n.is_empty()).collect();
+        assert!(names.windows(2).all(|w| w[0] < w[1]), "{links}");
+    }
+    assert!(
+        grounds.iter().any(|g| g.contains("wheel0/wheel_")),
+        "{grounds:?}"
+    );
     assert_eq!(v["robot"], "minimal");
     for key in ["position_error_m", "yaw_error_rad", "contacts_per_episode"] {
         assert!(

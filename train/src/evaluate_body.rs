@@ -168,6 +168,14 @@ pub fn leg_orientation(model: &RobotModel, world: &dyn SimWorld) -> f64 {
     }
 }
 
+/// The links touching the ground, sorted and each named once.
+fn ground_links(world: &dyn SimWorld) -> Vec<String> {
+    let mut links = world.ground_contacts();
+    links.sort();
+    links.dedup();
+    links
+}
+
 /// One control step of a traced episode (world frame).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TraceStep {
@@ -180,6 +188,9 @@ pub struct TraceStep {
     /// Base tilt [rad]: the angle between its z axis and the world's, by the rule a fall is
     /// judged by ([`tilt`]).
     pub tilt_rad: f64,
+    /// The links that touch the ground, sorted (the wheels of a robot that stands on them;
+    /// a wheel missing is a wheel off the ground).
+    pub ground_links: Vec<String>,
     /// The action that led here, as the policy output it (with any evaluation noise, before
     /// the terms clip it); empty at the episode's start.
     pub action: Vec<f32>,
@@ -193,7 +204,7 @@ impl TraceStep {
             .iter()
             .map(|n| format!(",action:{n}"))
             .collect();
-        format!("episode,step,base_x_m,base_y_m,base_yaw_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,target_x_m,target_y_m,target_z_m,target_yaw_rad,position_error_m,yaw_error_rad,tilt_rad{actions}")
+        format!("episode,step,base_x_m,base_y_m,base_yaw_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,target_x_m,target_y_m,target_z_m,target_yaw_rad,position_error_m,yaw_error_rad,tilt_rad,ground_links{actions}")
     }
 
     fn of(env: &WholeBody, action: &[f32]) -> Self {
@@ -205,6 +216,7 @@ impl TraceStep {
             tool: [t.x, t.y, t.z, tool_yaw(&tool.rotation)],
             errors: [position, yaw],
             tilt_rad: tilt(&base.rotation),
+            ground_links: ground_links(env.world()),
             action: action.to_vec(),
         }
     }
@@ -222,6 +234,7 @@ impl TraceStep {
             .chain(&[self.tilt_rad])
             .map(|v| format!("{v:.4}"))
             .collect::<Vec<_>>();
+        values.push(self.ground_links.join("|"));
         values.extend((0..width).map(|i| match self.action.get(i) {
             Some(a) => format!("{a:.4}"),
             None => String::new(),
