@@ -168,14 +168,6 @@ pub fn leg_orientation(model: &RobotModel, world: &dyn SimWorld) -> f64 {
     }
 }
 
-/// The links touching the ground, sorted and each named once.
-fn ground_links(world: &dyn SimWorld) -> Vec<String> {
-    let mut links = world.ground_contacts();
-    links.sort();
-    links.dedup();
-    links
-}
-
 /// One control step of a traced episode (world frame).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TraceStep {
@@ -188,8 +180,8 @@ pub struct TraceStep {
     /// Base tilt [rad]: the angle between its z axis and the world's, by the rule a fall is
     /// judged by ([`tilt`]).
     pub tilt_rad: f64,
-    /// The links that touch the ground, sorted (the wheels of a robot that stands on them;
-    /// a wheel missing is a wheel off the ground).
+    /// The links that touch the ground, sorted, each once ([`SimWorld::ground_contacts`]; the
+    /// wheels of a robot that stands on them: a wheel missing is a wheel off the ground).
     pub ground_links: Vec<String>,
     /// The action that led here, as the policy output it (with any evaluation noise, before
     /// the terms clip it); empty at the episode's start.
@@ -216,7 +208,7 @@ impl TraceStep {
             tool: [t.x, t.y, t.z, tool_yaw(&tool.rotation)],
             errors: [position, yaw],
             tilt_rad: tilt(&base.rotation),
-            ground_links: ground_links(env.world()),
+            ground_links: env.world().ground_contacts(),
             action: action.to_vec(),
         }
     }

@@ -235,7 +235,9 @@ pub trait SimWorld: Send {
         z.z.clamp(-1.0, 1.0).acos()
     }
 
-    /// Links that touch the ground now.
+    /// Links that touch the ground now, sorted, each once: [`Self::contacts`] is sorted and
+    /// deduplicated by pair, and a pair's links are in order, so the links named before
+    /// [`GROUND`] come first, in order, then those named after it.
     fn ground_contacts(&self) -> Vec<String> {
         self.contacts()
             .into_iter()
