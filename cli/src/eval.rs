@@ -198,7 +198,8 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         .with_context(|| format!("reading the skill {}", skill_path.display()))?;
     let terms = file.arms()?.terms(&model)?;
     let control_hz = kumi_worlds::SimConfig::for_model(&model).control_hz;
-    let expected = kumi_terms::contract::contract(&model, &terms, &skill, control_hz);
+    let expected =
+        kumi_terms::contract::contract(&model, &terms, file.observation, &skill, control_hz);
     let probe = WholeBodyPolicy::load(&path, &expected, args.backend)?;
     let backend = probe.backend();
     let steps = probe

@@ -8,6 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use kumi_terms::action::{GoalBounds, JointBounds};
+use kumi_terms::ObservationOptions;
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig};
 use kumi_train::body_reward::{BodyWeights, PenaltyWeights};
 use kumi_train::env::Environment;
@@ -215,6 +216,10 @@ pub struct TrainBodyConfig {
     pub flat: Option<JointBounds>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub penalty: Option<PenaltyWeights>,
+    /// Optional observation slots (none when the section is absent; left out of the config's
+    /// hash then, so that policies trained before the section existed keep theirs).
+    #[serde(default, skip_serializing_if = "ObservationOptions::is_none")]
+    pub observation: ObservationOptions,
 }
 
 impl TrainBodyConfig {
@@ -236,6 +241,7 @@ impl TrainBodyConfig {
             weights: self.reward,
             penalty: self.penalty.unwrap_or_default(),
             arms: self.arms()?,
+            observation: self.observation,
         })
     }
 
@@ -626,7 +632,13 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
         .collect::<Result<Vec<_>, _>>()
         .with_context(|| format!("building the whole-body environment for `{}`", model.name))?;
     let control_hz = kumi_worlds::SimConfig::for_model(&model).control_hz;
-    let mut metadata = kumi_terms::contract::contract(&model, envs[0].terms(), &skill, control_hz);
+    let mut metadata = kumi_terms::contract::contract(
+        &model,
+        envs[0].terms(),
+        file.observation,
+        &skill,
+        control_hz,
+    );
     metadata.insert(
         kumi_policies::metadata::CONFIG_HASH.into(),
         kumi_policies::metadata::fingerprint(&serde_json::to_string(&trained)?),
@@ -756,6 +768,7 @@ mod tests {
             assert_eq!(after.task, first.task);
             assert_eq!(after.reward, first.reward);
             assert_eq!(after.penalty, first.penalty);
+            assert_eq!(after.observation, first.observation);
             assert_stage_follows(&before.ppo, &after.ppo);
         }
         assert_eq!(second.action, first.action);
@@ -827,6 +840,28 @@ mod tests {
             .unwrap();
         let tool = manipulator.ee_link.as_ref().unwrap();
         world.link_pose(tool).unwrap().translation.z
+    }
+
+    #[test]
+    fn the_observation_section_is_optional_checked_and_out_of_the_hash_when_absent() {
+        let (_, _, text) = SHIPPED_BODY_CONFIGS[2];
+        let plain: TrainBodyConfig = toml::from_str(text).unwrap();
+        assert!(plain.observation.is_none());
+        // Absent, it is not serialised: the config hash of policies trained before the section
+        // existed stays theirs.
+        assert!(!serde_json::to_string(&plain)
+            .unwrap()
+            .contains("observation"));
+        let with = format!("{text}\n[observation]\nbase_angular_velocity = true\n");
+        let spinning: TrainBodyConfig = toml::from_str(&with).unwrap();
+        assert!(spinning.observation.base_angular_velocity);
+        let env = spinning.environment(kumi_worlds::Engine::Rapier).unwrap();
+        assert!(env.observation.base_angular_velocity);
+        let typo = format!("{text}\n[observation]\nbase_angular_velocty = true\n");
+        let err = toml::from_str::<TrainBodyConfig>(&typo)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("base_angular_velocty"), "{err}");
     }
 
     #[test]

@@ -95,8 +95,13 @@ fn in_process_episode(hold_ticks: usize, ticks: usize) -> Vec<Vector3<f64>> {
     let config = kumi_tests::whole_body_config(Engine::Rapier, 0.6, bounds);
     let mut env = WholeBody::new(model.clone(), config, &skill, 0).unwrap();
     let terms = ActionTerms::new(&model, &bounds).unwrap();
-    let expected =
-        kumi_terms::contract::contract(&model, &terms, &skill, kumi_model::commands::CONTROL_HZ);
+    let expected = kumi_terms::contract::contract(
+        &model,
+        &terms,
+        Default::default(),
+        &skill,
+        kumi_model::commands::CONTROL_HZ,
+    );
     let mut policy = WholeBodyPolicy::load(&path, &expected, BackendChoice::Tract).unwrap();
     let home = env.world().home_state();
     env.world_mut().reset(&home);

@@ -186,6 +186,8 @@ fn every_shipped_whole_body_policy_fits_its_robot_and_the_shipped_skill() {
     struct Config {
         action: Option<kumi_terms::action::GoalBounds>,
         flat: Option<kumi_terms::action::JointBounds>,
+        #[serde(default)]
+        observation: kumi_terms::ObservationOptions,
     }
     let skill = std::fs::read(kumi_runtime::shipped_arm_policy()).unwrap();
     let mut loaded = Vec::new();
@@ -223,6 +225,7 @@ fn every_shipped_whole_body_policy_fits_its_robot_and_the_shipped_skill() {
             let expected = kumi_terms::contract::contract(
                 &robot,
                 &terms,
+                config.observation,
                 &skill,
                 kumi_model::commands::CONTROL_HZ,
             );

@@ -18,7 +18,7 @@ use kumi_policies::observation::{self as skill_obs, Goal, JOINTS, OBSERVATION_DI
 use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy};
 use kumi_terms::action::{planar_twist, ActionTerms, GoalBounds, JointBounds, WheelRamp};
-use kumi_terms::observation::{self as body_obs, BodyState, Target, ToolChain};
+use kumi_terms::observation::{self as body_obs, BodyState, ObservationOptions, Target, ToolChain};
 use kumi_worlds::{home_joint_positions, Engine, SimConfig, SimWorld};
 use nalgebra::{Isometry3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -94,6 +94,8 @@ pub struct WholeBodyConfig {
     /// The penalty baseline's terms (zero: none).
     pub penalty: PenaltyWeights,
     pub arms: ArmControl,
+    /// Optional observation slots beyond Table III.
+    pub observation: ObservationOptions,
 }
 
 /// One arm module as its term drives it.
@@ -227,7 +229,8 @@ impl WholeBody {
     }
 
     pub fn observation_dim(&self) -> usize {
-        let slots = body_obs::slots(self.wheel_joints.len(), self.terms.size());
+        let options = self.config.observation;
+        let slots = body_obs::slots(self.wheel_joints.len(), self.terms.size(), options);
         body_obs::size(&body_obs::with_arm_state(slots, self.flat_joints()))
     }
 
@@ -330,14 +333,17 @@ impl WholeBody {
     pub fn observation(&self) -> Vec<f32> {
         let velocities = self.world.joint_velocities();
         let wheels: Vec<f64> = self.wheel_joints.iter().map(|&i| velocities[i]).collect();
-        let mut obs = body_obs::build(&BodyState {
+        let (linear_w, angular_w) = self.world.base_twist_w();
+        let state = BodyState {
             base_pose_w: self.world.base_pose(),
-            base_linear_velocity_w: self.world.base_twist_w().0,
+            base_linear_velocity_w: linear_w,
+            base_angular_velocity_w: angular_w,
             tool_pose_w: self.observed_tool_pose_w(),
             target: self.target,
             wheel_velocities: &wheels,
             previous_action: &self.previous_action,
-        });
+        };
+        let mut obs = body_obs::build(&state, self.config.observation);
         if self.skill.is_none() {
             let positions = self.arm_values(&self.world.joint_positions());
             body_obs::push_arm_state(&mut obs, &positions, &self.arm_values(&velocities));

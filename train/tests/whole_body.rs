@@ -47,6 +47,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             rock: 0.0,
         },
         penalty: PenaltyWeights::default(),
+        observation: Default::default(),
         arms: ArmControl::Skill(GoalBounds {
             manipulator_position_m: 0.25,
             manipulator_rotation_rad: 0.5,
@@ -118,6 +119,40 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
             "{module}: tool pose differs by {d} m, {r} rad"
         );
     }
+}
+
+#[test]
+fn the_base_angular_velocity_slot_follows_table_iii_in_the_base_frame() {
+    let spinning = WholeBodyConfig {
+        observation: kumi_terms::ObservationOptions {
+            base_angular_velocity: true,
+        },
+        ..config(1.5)
+    };
+    let mut plain = WholeBody::new(model("tricycle"), config(1.5), &skill(), 3).unwrap();
+    let mut with = WholeBody::new(model("tricycle"), spinning, &skill(), 3).unwrap();
+    assert_eq!(with.observation_dim(), plain.observation_dim() + 3);
+    let (a, b) = (plain.reset(), with.reset());
+    assert_eq!(
+        b[..a.len()],
+        a[..],
+        "the same seed: Table III's slots are the same"
+    );
+    let turn = vec![0.7; with.terms().size()];
+    for _ in 0..10 {
+        let (a, b) = (plain.step(&turn).observation, with.step(&turn).observation);
+        assert_eq!(b[..a.len()], a[..]);
+        let (_, w_w) = with.world().base_twist_w();
+        let w_b = with.world().base_pose().rotation.inverse() * w_w;
+        let expected: Vec<f32> = w_b.iter().map(|v| *v as f32).collect();
+        assert_eq!(b[a.len()..], expected[..]);
+    }
+    assert!(
+        with.observation()[plain.observation_dim()..]
+            .iter()
+            .any(|w| w.abs() > 1e-3),
+        "a robot driven for 10 steps turns or rocks"
+    );
 }
 
 #[test]

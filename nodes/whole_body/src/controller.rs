@@ -16,7 +16,7 @@
 
 use kumi_model::RobotModel;
 use kumi_policies::observation::Goal;
-use kumi_terms::observation::{self, BodyState};
+use kumi_terms::observation::{self, BodyState, ObservationOptions};
 use kumi_terms::termination;
 use kumi_terms::{ActionTerms, Target, ToolChain, WheelRamp};
 use nalgebra::Isometry3;
@@ -84,6 +84,8 @@ pub struct WholeBodyController {
     tilt_limit_rad: Option<f64>,
     /// The tilt [rad] the base tipped over at, while holding for it.
     tipped_rad: Option<f64>,
+    /// The optional observation slots the policy was trained with.
+    observation: ObservationOptions,
 }
 
 impl WholeBodyController {
@@ -117,7 +119,15 @@ impl WholeBodyController {
             last_goals: None,
             tilt_limit_rad: None,
             tipped_rad: None,
+            observation: ObservationOptions::default(),
         })
+    }
+
+    /// Builds the observation with the optional slots `options` (those the policy's
+    /// observation description names: [`ObservationOptions::from_description`]).
+    pub fn with_observation(mut self, options: ObservationOptions) -> Self {
+        self.observation = options;
+        self
     }
 
     /// Stops driving when the base tilts past `limit_rad` (the tilt that ended the policy's
@@ -197,14 +207,16 @@ impl WholeBodyController {
             .iter()
             .map(|&(m, j)| state.modules[m].qd[j])
             .collect();
-        let obs = observation::build(&BodyState {
+        let body = BodyState {
             base_pose_w: state.base.pose_w,
             base_linear_velocity_w: state.base.linear_velocity_w,
+            base_angular_velocity_w: state.base.angular_velocity_w,
             tool_pose_w,
             target,
             wheel_velocities: &wheels,
             previous_action: &self.previous_action,
-        });
+        };
+        let obs = observation::build(&body, self.observation);
         let action = match (self.policy)(&obs) {
             Ok(a) if a.len() == self.terms.size() => a,
             Ok(a) => {
@@ -450,5 +462,28 @@ mod tests {
         assert!(speeds(&d).iter().all(|v| *v == 5.0), "{d:?}");
         let d = c.step(&moving(&c, [1.0, 0.0], 0.0));
         assert!(speeds(&d).iter().all(|v| *v == 5.0), "{d:?}");
+    }
+
+    #[test]
+    fn the_optional_angular_velocity_slot_comes_last_in_the_base_frame() {
+        let mut plain = tricycle();
+        let spinning = ObservationOptions {
+            base_angular_velocity: true,
+        };
+        let mut with = tricycle().with_observation(spinning);
+        plain.set_target(target(1.0));
+        with.set_target(target(1.0));
+        // The base rolled 0.3 rad about its x axis, turning about world z at 1 rad/s: in the
+        // base frame that is (0, sin 0.3, cos 0.3) rad/s.
+        let mut s = state(&with, 0.3);
+        s.base.angular_velocity_w = Vector3::new(0.0, 0.0, 1.0);
+        let a = plain.step(&s).observation.unwrap();
+        let b = with.step(&s).observation.unwrap();
+        assert_eq!(b.len(), a.len() + 3);
+        assert_eq!(b[..a.len()], a[..]);
+        let expected = [0.0, 0.3_f64.sin() as f32, 0.3_f64.cos() as f32];
+        for (o, e) in b[a.len()..].iter().zip(expected) {
+            assert!((o - e).abs() < 1e-6, "{b:?}");
+        }
     }
 }

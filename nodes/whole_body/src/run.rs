@@ -24,7 +24,7 @@ use kumi_msgs::std_msgs::{Float64, Header};
 use kumi_ros::motion_stack::MotionStackProfile;
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_runtime::{BackendChoice, ModelFile, RuntimeError, WholeBodyPolicy};
-use kumi_terms::{ActionTerms, GoalBounds};
+use kumi_terms::{ActionTerms, GoalBounds, ObservationOptions};
 use nalgebra::Vector3;
 use ros2_client::Publisher;
 use tracing::{info, warn};
@@ -110,9 +110,15 @@ pub fn prepare(config: &WholeBodyNodeConfig) -> Result<WholeBodyController, Whol
         message,
     };
     let terms = ActionTerms::new(&config.model, &bounds).map_err(|e| robot_error(e.to_string()))?;
+    let options = file
+        .metadata
+        .get(kumi_policies::metadata::OBSERVATION)
+        .map(|d| ObservationOptions::from_description(d))
+        .unwrap_or_default();
     let expected = kumi_terms::contract::contract(
         &config.model,
         &terms,
+        options,
         &skill,
         kumi_model::commands::CONTROL_HZ,
     );
@@ -128,7 +134,8 @@ pub fn prepare(config: &WholeBodyNodeConfig) -> Result<WholeBodyController, Whol
         terms,
         Box::new(move |obs| policy.act(obs).map_err(|e| e.to_string())),
     )
-    .map_err(robot_error)?;
+    .map_err(robot_error)?
+    .with_observation(options);
     Ok(match config.tilt_limit_rad {
         Some(limit_rad) => controller.with_tilt_limit(limit_rad),
         None => controller,

@@ -8,7 +8,7 @@ use kumi_model::RobotModel;
 use kumi_policies::metadata;
 
 use crate::action::ActionTerms;
-use crate::observation;
+use crate::observation::{self, ObservationOptions};
 
 /// Format tag of a whole-body policy.
 pub const WHOLE_BODY_FORMAT: &str = "kumi-policy/whole-body/1";
@@ -62,17 +62,20 @@ pub fn morphology_fingerprint(model: &RobotModel) -> String {
     metadata::fingerprint(&text)
 }
 
-/// What a whole-body policy for `model`, its `terms`, the skill file `skill_onnx` (its bytes;
-/// unused by flat terms) and `control_hz` must carry.
+/// What a whole-body policy for `model`, its `terms`, its optional observation slots
+/// `options`, the skill file `skill_onnx` (its bytes; unused by flat terms) and `control_hz`
+/// must carry.
 pub fn contract(
     model: &RobotModel,
     terms: &ActionTerms,
+    options: ObservationOptions,
     skill_onnx: &[u8],
     control_hz: f64,
 ) -> BTreeMap<String, String> {
     let wheels = terms.wheels().map(|w| w.wheels).sum();
     let arm_joints = terms.joint_terms().count() * kumi_policies::observation::JOINTS;
-    let slots = observation::with_arm_state(observation::slots(wheels, terms.size()), arm_joints);
+    let upper = observation::slots(wheels, terms.size(), options);
+    let slots = observation::with_arm_state(upper, arm_joints);
     let skill = if terms.uses_skill() {
         metadata::fingerprint_bytes(skill_onnx)
     } else {

@@ -19,4 +19,4 @@ pub use action::{
     ActionTerms, ArmGoalTerm, GoalBounds, JointBounds, JointTargetTerm, TermError, WheelRamp,
     WheelTerm,
 };
-pub use observation::{BodyState, ObservationSlot, Target, ToolChain};
+pub use observation::{BodyState, ObservationOptions, ObservationSlot, Target, ToolChain};

@@ -18,22 +18,65 @@ pub struct ObservationSlot {
     pub frame: &'static str,
 }
 
-/// The slots, in order, for a robot with `wheels` wheel joints and an action of `action_size`.
-pub fn slots(wheels: usize, action_size: usize) -> Vec<ObservationSlot> {
+/// The name of the optional base angular velocity slot ([`ObservationOptions`]).
+pub const BASE_ANGULAR_VELOCITY: &str = "base_angular_velocity";
+
+/// Slots a policy may observe beyond Table III (`[observation]` in a whole-body config; none
+/// by default). A policy file names them in its observation description, so whoever runs it
+/// reads them from there ([`ObservationOptions::from_description`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObservationOptions {
+    /// The base's angular velocity [rad/s] in the base frame, after the previous action: how
+    /// fast the base tips and turns, which projected gravity shows only as an angle.
+    #[serde(default)]
+    pub base_angular_velocity: bool,
+}
+
+impl ObservationOptions {
+    /// True when no optional slot is on (Table III as it is).
+    pub fn is_none(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// The options a policy's observation description ([`describe`]) was built with.
+    pub fn from_description(description: &str) -> Self {
+        let has = |name: &str| {
+            description
+                .split(';')
+                .any(|slot| slot.split(':').next() == Some(name))
+        };
+        Self {
+            base_angular_velocity: has(BASE_ANGULAR_VELOCITY),
+        }
+    }
+}
+
+/// The slots, in order, for a robot with `wheels` wheel joints, an action of `action_size`
+/// and the optional slots `options`.
+pub fn slots(
+    wheels: usize,
+    action_size: usize,
+    options: ObservationOptions,
+) -> Vec<ObservationSlot> {
     let slot = |name, size, unit, frame| ObservationSlot {
         name,
         size,
         unit,
         frame,
     };
-    vec![
+    let mut slots = vec![
         slot("base_linear_velocity", 3, "m/s", "base"),
         slot("projected_gravity", 3, "1", "base"),
         slot("tool_to_target", 3, "m", "base"),
         slot("target_yaw_error", 1, "rad", "world z"),
         slot("wheel_velocities", wheels, "rad/s", "joint"),
         slot("previous_action", action_size, "1", "policy"),
-    ]
+    ];
+    if options.base_angular_velocity {
+        slots.push(slot(BASE_ANGULAR_VELOCITY, 3, "rad/s", "base"));
+    }
+    slots
 }
 
 /// The flat baseline's slots (SPEC section 6): the upper-level `slots` followed by every arm
@@ -160,6 +203,9 @@ pub struct BodyState<'a> {
     pub base_pose_w: Isometry3<f64>,
     /// The base's linear velocity [m/s] in the world frame.
     pub base_linear_velocity_w: Vector3<f64>,
+    /// The base's angular velocity [rad/s] in the world frame (observed only with
+    /// [`ObservationOptions::base_angular_velocity`]).
+    pub base_angular_velocity_w: Vector3<f64>,
     /// The manipulator's tool pose in the world.
     pub tool_pose_w: Isometry3<f64>,
     pub target: Target,
@@ -171,20 +217,24 @@ pub struct BodyState<'a> {
     pub previous_action: &'a [f32],
 }
 
-/// Builds the observation, slot by slot as [`slots`] lists them.
-pub fn build(state: &BodyState) -> Vec<f32> {
+/// Builds the observation, slot by slot as [`slots`] lists them for `options`.
+pub fn build(state: &BodyState, options: ObservationOptions) -> Vec<f32> {
     let to_base = state.base_pose_w.rotation.inverse();
     let velocity_b = to_base * state.base_linear_velocity_w;
     let gravity_b = to_base * -Vector3::z();
     let to_target_b = to_base * (state.target.position_w - state.tool_pose_w.translation.vector);
     let mut obs =
-        Vec::with_capacity(10 + state.wheel_velocities.len() + state.previous_action.len());
+        Vec::with_capacity(13 + state.wheel_velocities.len() + state.previous_action.len());
     obs.extend(velocity_b.iter().map(|v| *v as f32));
     obs.extend(gravity_b.iter().map(|v| *v as f32));
     obs.extend(to_target_b.iter().map(|v| *v as f32));
     obs.push(yaw_error(&state.tool_pose_w, &state.target) as f32);
     obs.extend(state.wheel_velocities.iter().map(|v| *v as f32));
     obs.extend_from_slice(state.previous_action);
+    if options.base_angular_velocity {
+        let angular_b = to_base * state.base_angular_velocity_w;
+        obs.extend(angular_b.iter().map(|v| *v as f32));
+    }
     obs
 }
 
@@ -213,14 +263,16 @@ mod tests {
             position_w: Vector3::new(2.0, 0.0, 1.5),
             yaw: 0.0,
         };
-        let obs = build(&BodyState {
+        let state = BodyState {
             base_pose_w: base,
             base_linear_velocity_w: Vector3::new(1.0, 0.0, 0.0),
+            base_angular_velocity_w: Vector3::new(0.5, 0.0, 2.0),
             tool_pose_w: tool,
             target,
             wheel_velocities: &[3.0, -3.0],
             previous_action: &[0.5, -1.5],
-        });
+        };
+        let obs = build(&state, ObservationOptions::default());
         let expected = [
             0.0,
             -1.0,
@@ -241,19 +293,58 @@ mod tests {
         for (o, e) in obs.iter().zip(expected) {
             assert!((o - e).abs() < 1e-6, "{obs:?}");
         }
-        assert_eq!(size(&slots(2, 2)), obs.len());
+        assert_eq!(size(&slots(2, 2, ObservationOptions::default())), obs.len());
         let (distance, yaw) = target_errors(&tool, &target);
         assert!((distance - 2.0).abs() < 1e-12 && (yaw - PI / 2.0).abs() < 1e-12);
+
+        // The same state, observing the base's angular velocity: the base's x axis is world
+        // y and its y axis world -x, so world (0.5, 0, 2) rad/s is base (0, -0.5, 2).
+        let with = ObservationOptions {
+            base_angular_velocity: true,
+        };
+        let obs_w = build(&state, with);
+        assert_eq!(
+            obs_w[..obs.len()],
+            obs[..],
+            "the Table III slots come first, unchanged"
+        );
+        let angular = &obs_w[obs.len()..];
+        assert_eq!(angular.len(), 3);
+        for (o, e) in angular.iter().zip([0.0, -0.5, 2.0]) {
+            assert!((o - e).abs() < 1e-6, "{angular:?}");
+        }
+        assert_eq!(size(&slots(2, 2, with)), obs_w.len());
+    }
+
+    #[test]
+    fn options_read_back_from_the_description() {
+        let with = ObservationOptions {
+            base_angular_velocity: true,
+        };
+        for options in [ObservationOptions::default(), with] {
+            let text = describe(&slots(6, 18, options));
+            assert_eq!(
+                ObservationOptions::from_description(&text),
+                options,
+                "{text}"
+            );
+        }
+        assert!(!with.is_none() && ObservationOptions::default().is_none());
+        let near_miss = "base_angular_velocity_x:3:rad/s:base";
+        assert!(ObservationOptions::from_description(near_miss).is_none());
     }
 
     #[test]
     fn slots_describe_themselves() {
-        let text = describe(&slots(6, 18));
+        let text = describe(&slots(6, 18, ObservationOptions::default()));
         assert!(
             text.starts_with("base_linear_velocity:3:m/s:base;"),
             "{text}"
         );
         assert!(text.ends_with("wheel_velocities:6:rad/s:joint;previous_action:18:1:policy"));
-        assert_eq!(size(&slots(6, 18)), 10 + 6 + 18);
+        assert_eq!(
+            size(&slots(6, 18, ObservationOptions::default())),
+            10 + 6 + 18
+        );
     }
 }

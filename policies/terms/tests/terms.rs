@@ -4,12 +4,18 @@ use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel, Role};
 use kumi_policies::rotation::orientation_error;
 use kumi_terms::action::{turn_governor, ActionTerms, GoalBounds, JointBounds, Term, WheelRamp};
 use kumi_terms::contract::{self, ContractMismatch};
+use kumi_terms::ObservationOptions;
 use nalgebra::Vector3;
 
 fn robot(name: &str) -> RobotModel {
     let library = ModuleLibrary::shipped();
     assemble(&load_morphology(name, &library).unwrap(), &library)
 }
+
+/// Table III's slots, no optional one.
+const NONE: ObservationOptions = ObservationOptions {
+    base_angular_velocity: false,
+};
 
 const BOUNDS: GoalBounds = GoalBounds {
     manipulator_position_m: 0.25,
@@ -108,13 +114,14 @@ fn terms_follow_the_morphology_order_and_roles() {
 fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
     let (tricycle, dragon) = (robot("tricycle"), robot("dragon"));
     let terms = ActionTerms::new(&tricycle, &BOUNDS).unwrap();
-    let trained = contract::contract(&tricycle, &terms, b"skill-a", 30.0);
+    let trained = contract::contract(&tricycle, &terms, NONE, b"skill-a", 30.0);
     assert_eq!(contract::check(&trained, &trained), Ok(()));
     assert_eq!(trained[kumi_policies::metadata::OBSERVATION_DIM_KEY], "37");
 
     let other_robot = contract::contract(
         &dragon,
         &ActionTerms::new(&dragon, &BOUNDS).unwrap(),
+        NONE,
         b"skill-a",
         30.0,
     );
@@ -129,7 +136,7 @@ fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
         }
         other => panic!("{other:?}"),
     }
-    let other_skill = contract::contract(&tricycle, &terms, b"skill-b", 30.0);
+    let other_skill = contract::contract(&tricycle, &terms, NONE, b"skill-b", 30.0);
     let err = contract::check(&other_skill, &trained)
         .unwrap_err()
         .to_string();
@@ -144,12 +151,26 @@ fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
     )
     .unwrap();
     let err = contract::check(
-        &contract::contract(&tricycle, &wider, b"skill-a", 30.0),
+        &contract::contract(&tricycle, &wider, NONE, b"skill-a", 30.0),
         &trained,
     )
     .unwrap_err()
     .to_string();
     assert!(err.contains(contract::ACTION), "{err}");
+    // The same robot and terms observing the base's angular velocity: the observation's size
+    // differs first, and the description names the slot.
+    let spinning = ObservationOptions {
+        base_angular_velocity: true,
+    };
+    let with = contract::contract(&tricycle, &terms, spinning, b"skill-a", 30.0);
+    assert_eq!(with[kumi_policies::metadata::OBSERVATION_DIM_KEY], "40");
+    let err = contract::check(&with, &trained).unwrap_err().to_string();
+    assert!(
+        err.contains(kumi_policies::metadata::OBSERVATION_DIM_KEY),
+        "{err}"
+    );
+    let description = &with[kumi_policies::metadata::OBSERVATION];
+    assert_eq!(ObservationOptions::from_description(description), spinning);
     let mut missing = trained.clone();
     missing.remove(contract::SKILL_FINGERPRINT);
     assert_eq!(
@@ -260,7 +281,7 @@ fn flat_terms_command_every_arm_joint_around_home_by_hand() {
     let err = GoalBounds::from_description(&described).unwrap_err();
     assert!(err.to_string().contains("flat baseline"), "{err}");
     // A flat policy's contract carries no skill and the arm state slots.
-    let c = contract::contract(&model, &terms, b"any skill", 30.0);
+    let c = contract::contract(&model, &terms, NONE, b"any skill", 30.0);
     assert_eq!(c[contract::SKILL_FINGERPRINT], contract::NO_SKILL);
     assert!(c[kumi_policies::metadata::OBSERVATION]
         .ends_with("arm_joint_positions:28:rad:joint;arm_joint_velocities:28:rad/s:joint"));
