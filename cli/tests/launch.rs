@@ -91,14 +91,21 @@ fn in_process_episode(hold_ticks: usize, ticks: usize) -> Vec<Vector3<f64>> {
     let file = kumi_runtime::ModelFile::decode(std::fs::read(&path).unwrap()).unwrap();
     let bounds =
         GoalBounds::from_description(&file.metadata[kumi_terms::contract::ACTION]).unwrap();
+    // The optional observation slots, as the whole-body node reads them: from the file.
+    let options = kumi_terms::ObservationOptions::from_description(
+        &file.metadata[kumi_policies::metadata::OBSERVATION],
+    );
     let skill = std::fs::read(kumi_runtime::shipped_arm_policy()).unwrap();
-    let config = kumi_tests::whole_body_config(Engine::Rapier, 0.6, bounds);
+    let config = kumi_train::whole_body::WholeBodyConfig {
+        observation: options,
+        ..kumi_tests::whole_body_config(Engine::Rapier, 0.6, bounds)
+    };
     let mut env = WholeBody::new(model.clone(), config, &skill, 0).unwrap();
     let terms = ActionTerms::new(&model, &bounds).unwrap();
     let expected = kumi_terms::contract::contract(
         &model,
         &terms,
-        Default::default(),
+        options,
         &skill,
         kumi_model::commands::CONTROL_HZ,
     );
