@@ -200,7 +200,17 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
     let control_hz = kumi_worlds::SimConfig::for_model(&model).control_hz;
     let expected =
         kumi_terms::contract::contract(&model, &terms, file.observation, &skill, control_hz);
-    let probe = WholeBodyPolicy::load(&path, &expected, args.backend)?;
+    let probe = WholeBodyPolicy::load(&path, &expected, args.backend).with_context(|| {
+        match &args.config {
+            Some(config) => format!("checking {} against {}", path.display(), config.display()),
+            None => format!(
+                "checking {} against the shipped {} config for {}: a policy trained with another config needs it passed with --config",
+                path.display(),
+                args.variant,
+                model.name
+            ),
+        }
+    })?;
     let backend = probe.backend();
     let steps = probe
         .metadata()

@@ -857,6 +857,10 @@ mod tests {
         assert!(spinning.observation.base_angular_velocity);
         let env = spinning.environment(kumi_worlds::Engine::Rapier).unwrap();
         assert!(env.observation.base_angular_velocity);
+        assert!(!env.observation.arm_joint_angles);
+        let angles = format!("{text}\n[observation]\narm_joint_angles = true\n");
+        let angles: TrainBodyConfig = toml::from_str(&angles).unwrap();
+        assert!(angles.observation.arm_joint_angles && !angles.observation.base_angular_velocity);
         let typo = format!("{text}\n[observation]\nbase_angular_velocty = true\n");
         let err = toml::from_str::<TrainBodyConfig>(&typo)
             .unwrap_err()

@@ -44,12 +44,18 @@ const GOVERNED: GoalBounds = GoalBounds {
     ..BOUNDS
 };
 
-/// Table III's slots, and with them the base's angular velocity.
+/// Table III's slots; with them the base's angular velocity; with both optional slots.
 const PLAIN: ObservationOptions = ObservationOptions {
     base_angular_velocity: false,
+    arm_joint_angles: false,
 };
 const SPINNING: ObservationOptions = ObservationOptions {
     base_angular_velocity: true,
+    arm_joint_angles: false,
+};
+const BOTH: ObservationOptions = ObservationOptions {
+    base_angular_velocity: true,
+    arm_joint_angles: true,
 };
 
 fn env(
@@ -205,6 +211,7 @@ fn the_node_observation_equals_training_bit_for_bit_rapier() {
         check(name, Engine::Rapier, RAMPED, PLAIN);
         check(name, Engine::Rapier, GOVERNED, PLAIN);
         check(name, Engine::Rapier, BOUNDS, SPINNING);
+        check(name, Engine::Rapier, BOUNDS, BOTH);
     }
 }
 
@@ -216,6 +223,7 @@ fn the_node_observation_equals_training_bit_for_bit_mujoco() {
         check(name, Engine::Mujoco, RAMPED, PLAIN);
         check(name, Engine::Mujoco, GOVERNED, PLAIN);
         check(name, Engine::Mujoco, BOUNDS, SPINNING);
+        check(name, Engine::Mujoco, BOUNDS, BOTH);
     }
 }
 

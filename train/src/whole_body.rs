@@ -230,7 +230,9 @@ impl WholeBody {
 
     pub fn observation_dim(&self) -> usize {
         let options = self.config.observation;
-        let slots = body_obs::slots(self.wheel_joints.len(), self.terms.size(), options);
+        let arm_joints = self.arms.iter().map(|a| a.joints.len()).sum();
+        let wheels = self.wheel_joints.len();
+        let slots = body_obs::slots(wheels, arm_joints, self.terms.size(), options);
         body_obs::size(&body_obs::with_arm_state(slots, self.flat_joints()))
     }
 
@@ -334,6 +336,12 @@ impl WholeBody {
         let velocities = self.world.joint_velocities();
         let wheels: Vec<f64> = self.wheel_joints.iter().map(|&i| velocities[i]).collect();
         let (linear_w, angular_w) = self.world.base_twist_w();
+        let positions = self.world.joint_positions();
+        let arm_angles = if self.config.observation.arm_joint_angles {
+            self.arm_values(&positions)
+        } else {
+            Vec::new()
+        };
         let state = BodyState {
             base_pose_w: self.world.base_pose(),
             base_linear_velocity_w: linear_w,
@@ -341,11 +349,12 @@ impl WholeBody {
             tool_pose_w: self.observed_tool_pose_w(),
             target: self.target,
             wheel_velocities: &wheels,
+            arm_joint_angles: &arm_angles,
             previous_action: &self.previous_action,
         };
         let mut obs = body_obs::build(&state, self.config.observation);
         if self.skill.is_none() {
-            let positions = self.arm_values(&self.world.joint_positions());
+            let positions = self.arm_values(&positions);
             body_obs::push_arm_state(&mut obs, &positions, &self.arm_values(&velocities));
         }
         obs

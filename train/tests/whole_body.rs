@@ -126,6 +126,7 @@ fn the_base_angular_velocity_slot_follows_table_iii_in_the_base_frame() {
     let spinning = WholeBodyConfig {
         observation: kumi_terms::ObservationOptions {
             base_angular_velocity: true,
+            ..Default::default()
         },
         ..config(1.5)
     };
@@ -153,6 +154,38 @@ fn the_base_angular_velocity_slot_follows_table_iii_in_the_base_frame() {
             .any(|w| w.abs() > 1e-3),
         "a robot driven for 10 steps turns or rocks"
     );
+}
+
+#[test]
+fn the_arm_joint_angle_slot_holds_each_arm_modules_angles_in_the_terms_order() {
+    let angles = WholeBodyConfig {
+        observation: kumi_terms::ObservationOptions {
+            arm_joint_angles: true,
+            ..Default::default()
+        },
+        ..config(1.5)
+    };
+    let mut plain = WholeBody::new(model("tricycle"), config(1.5), &skill(), 3).unwrap();
+    let mut with = WholeBody::new(model("tricycle"), angles, &skill(), 3).unwrap();
+    assert_eq!(with.observation_dim(), plain.observation_dim() + 4 * 7);
+    let (a, b) = (plain.reset(), with.reset());
+    assert_eq!(b[..a.len()], a[..]);
+    let arms: Vec<String> = with.terms().arms().map(|a| a.module.clone()).collect();
+    let reach = vec![0.5; with.terms().size()];
+    for _ in 0..5 {
+        let (a, b) = (
+            plain.step(&reach).observation,
+            with.step(&reach).observation,
+        );
+        assert_eq!(b[..a.len()], a[..]);
+        let q = with.world().joint_positions();
+        let expected: Vec<f32> = arms
+            .iter()
+            .flat_map(|m| q[with.world().module_range(m).unwrap()].to_vec())
+            .map(|v| v as f32)
+            .collect();
+        assert_eq!(b[a.len()..], expected[..]);
+    }
 }
 
 #[test]

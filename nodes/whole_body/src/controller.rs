@@ -74,6 +74,9 @@ pub struct WholeBodyController {
     modules: Vec<String>,
     /// (module index, joint index) of every wheel joint, in training's order.
     wheel_joints: Vec<(usize, usize)>,
+    /// Indices in [`Self::modules`] of the arm modules, in training's order (the terms' arm
+    /// terms, then their flat joint terms).
+    arm_modules: Vec<usize>,
     policy: PolicyFn,
     target: Option<Target>,
     previous_action: Vec<f32>,
@@ -106,6 +109,16 @@ impl WholeBodyController {
                 }
             }
         }
+        let arm_names = terms.arms().map(|a| &a.module);
+        let arm_modules = arm_names
+            .chain(terms.joint_terms().map(|j| &j.module))
+            .map(|name| {
+                modules
+                    .iter()
+                    .position(|m| m == name)
+                    .expect("the terms name their modules")
+            })
+            .collect();
         Ok(Self {
             previous_action: vec![0.0; terms.size()],
             wheel_ramp: WheelRamp::new(&terms, kumi_model::commands::CONTROL_HZ),
@@ -114,6 +127,7 @@ impl WholeBodyController {
             joints,
             modules,
             wheel_joints,
+            arm_modules,
             policy,
             target: None,
             last_goals: None,
@@ -207,6 +221,13 @@ impl WholeBodyController {
             .iter()
             .map(|&(m, j)| state.modules[m].qd[j])
             .collect();
+        let arm_angles: Vec<f64> = if self.observation.arm_joint_angles {
+            let arms = self.arm_modules.iter();
+            arms.flat_map(|&m| state.modules[m].q.iter().copied())
+                .collect()
+        } else {
+            Vec::new()
+        };
         let body = BodyState {
             base_pose_w: state.base.pose_w,
             base_linear_velocity_w: state.base.linear_velocity_w,
@@ -214,6 +235,7 @@ impl WholeBodyController {
             tool_pose_w,
             target,
             wheel_velocities: &wheels,
+            arm_joint_angles: &arm_angles,
             previous_action: &self.previous_action,
         };
         let obs = observation::build(&body, self.observation);
@@ -469,6 +491,7 @@ mod tests {
         let mut plain = tricycle();
         let spinning = ObservationOptions {
             base_angular_velocity: true,
+            ..Default::default()
         };
         let mut with = tricycle().with_observation(spinning);
         plain.set_target(target(1.0));
@@ -485,5 +508,41 @@ mod tests {
         for (o, e) in b[a.len()..].iter().zip(expected) {
             assert!((o - e).abs() < 1e-6, "{b:?}");
         }
+    }
+
+    #[test]
+    fn the_optional_joint_angle_slot_holds_every_arm_modules_angles_in_training_order() {
+        let angles = ObservationOptions {
+            arm_joint_angles: true,
+            ..Default::default()
+        };
+        let mut plain = tricycle();
+        let mut with = tricycle().with_observation(angles);
+        plain.set_target(target(1.0));
+        with.set_target(target(1.0));
+        // Each joint's angle names its module and joint: module m, joint j at m + j / 10.
+        let mut s = state(&with, 0.0);
+        for (m, module) in s.modules.iter_mut().enumerate() {
+            for (j, q) in module.q.iter_mut().enumerate() {
+                *q = m as f64 + j as f64 / 10.0;
+            }
+        }
+        let a = plain.step(&s).observation.unwrap();
+        let b = with.step(&s).observation.unwrap();
+        assert_eq!(b[..a.len()], a[..]);
+        let terms = with.terms();
+        let expected: Vec<f32> = terms
+            .arms()
+            .flat_map(|arm| {
+                let m = with
+                    .modules()
+                    .iter()
+                    .position(|n| *n == arm.module)
+                    .unwrap();
+                s.modules[m].q.iter().map(|q| *q as f32)
+            })
+            .collect();
+        assert_eq!(expected.len(), 4 * 7, "Tricycle has four arm modules");
+        assert_eq!(b[a.len()..], expected[..]);
     }
 }

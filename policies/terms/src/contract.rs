@@ -73,9 +73,11 @@ pub fn contract(
     control_hz: f64,
 ) -> BTreeMap<String, String> {
     let wheels = terms.wheels().map(|w| w.wheels).sum();
-    let arm_joints = terms.joint_terms().count() * kumi_policies::observation::JOINTS;
-    let upper = observation::slots(wheels, terms.size(), options);
-    let slots = observation::with_arm_state(upper, arm_joints);
+    let joints = kumi_policies::observation::JOINTS;
+    let flat_joints = terms.joint_terms().count() * joints;
+    let arm_joints = terms.arms().count() * joints + flat_joints;
+    let upper = observation::slots(wheels, arm_joints, terms.size(), options);
+    let slots = observation::with_arm_state(upper, flat_joints);
     let skill = if terms.uses_skill() {
         metadata::fingerprint_bytes(skill_onnx)
     } else {

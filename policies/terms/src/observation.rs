@@ -21,6 +21,9 @@ pub struct ObservationSlot {
 /// The name of the optional base angular velocity slot ([`ObservationOptions`]).
 pub const BASE_ANGULAR_VELOCITY: &str = "base_angular_velocity";
 
+/// The name of the optional arm joint angle slot ([`ObservationOptions`]).
+pub const ARM_JOINT_ANGLES: &str = "arm_joint_angles";
+
 /// Slots a policy may observe beyond Table III (`[observation]` in a whole-body config; none
 /// by default). A policy file names them in its observation description, so whoever runs it
 /// reads them from there ([`ObservationOptions::from_description`]).
@@ -31,6 +34,11 @@ pub struct ObservationOptions {
     /// fast the base tips and turns, which projected gravity shows only as an angle.
     #[serde(default)]
     pub base_angular_velocity: bool,
+    /// Every arm module's joint angles [rad] (module by module in the action terms' order,
+    /// each in actuator order), after the base angular velocity: where the legs stand, which
+    /// the previous action shows only as the goals they were sent.
+    #[serde(default)]
+    pub arm_joint_angles: bool,
 }
 
 impl ObservationOptions {
@@ -48,14 +56,16 @@ impl ObservationOptions {
         };
         Self {
             base_angular_velocity: has(BASE_ANGULAR_VELOCITY),
+            arm_joint_angles: has(ARM_JOINT_ANGLES),
         }
     }
 }
 
-/// The slots, in order, for a robot with `wheels` wheel joints, an action of `action_size`
-/// and the optional slots `options`.
+/// The slots, in order, for a robot with `wheels` wheel joints and `arm_joints` arm joints
+/// (all arm modules together), an action of `action_size` and the optional slots `options`.
 pub fn slots(
     wheels: usize,
+    arm_joints: usize,
     action_size: usize,
     options: ObservationOptions,
 ) -> Vec<ObservationSlot> {
@@ -75,6 +85,9 @@ pub fn slots(
     ];
     if options.base_angular_velocity {
         slots.push(slot(BASE_ANGULAR_VELOCITY, 3, "rad/s", "base"));
+    }
+    if options.arm_joint_angles {
+        slots.push(slot(ARM_JOINT_ANGLES, arm_joints, "rad", "joint"));
     }
     slots
 }
@@ -212,6 +225,9 @@ pub struct BodyState<'a> {
     /// Every wheel's angular velocity [rad/s], wheel modules in morphology order, each
     /// module's wheels in actuator order.
     pub wheel_velocities: &'a [f64],
+    /// Every arm module's joint angles [rad], as [`ObservationOptions::arm_joint_angles`]
+    /// orders them (observed only with that option).
+    pub arm_joint_angles: &'a [f64],
     /// The action of the previous control step (zeros after a reset), as the policy output it
     /// (unclipped).
     pub previous_action: &'a [f32],
@@ -234,6 +250,9 @@ pub fn build(state: &BodyState, options: ObservationOptions) -> Vec<f32> {
     if options.base_angular_velocity {
         let angular_b = to_base * state.base_angular_velocity_w;
         obs.extend(angular_b.iter().map(|v| *v as f32));
+    }
+    if options.arm_joint_angles {
+        obs.extend(state.arm_joint_angles.iter().map(|v| *v as f32));
     }
     obs
 }
@@ -270,6 +289,7 @@ mod tests {
             tool_pose_w: tool,
             target,
             wheel_velocities: &[3.0, -3.0],
+            arm_joint_angles: &[0.25, -0.5, 1.0],
             previous_action: &[0.5, -1.5],
         };
         let obs = build(&state, ObservationOptions::default());
@@ -293,7 +313,10 @@ mod tests {
         for (o, e) in obs.iter().zip(expected) {
             assert!((o - e).abs() < 1e-6, "{obs:?}");
         }
-        assert_eq!(size(&slots(2, 2, ObservationOptions::default())), obs.len());
+        assert_eq!(
+            size(&slots(2, 3, 2, ObservationOptions::default())),
+            obs.len()
+        );
         let (distance, yaw) = target_errors(&tool, &target);
         assert!((distance - 2.0).abs() < 1e-12 && (yaw - PI / 2.0).abs() < 1e-12);
 
@@ -301,6 +324,7 @@ mod tests {
         // y and its y axis world -x, so world (0.5, 0, 2) rad/s is base (0, -0.5, 2).
         let with = ObservationOptions {
             base_angular_velocity: true,
+            ..Default::default()
         };
         let obs_w = build(&state, with);
         assert_eq!(
@@ -313,16 +337,42 @@ mod tests {
         for (o, e) in angular.iter().zip([0.0, -0.5, 2.0]) {
             assert!((o - e).abs() < 1e-6, "{angular:?}");
         }
-        assert_eq!(size(&slots(2, 2, with)), obs_w.len());
+        assert_eq!(size(&slots(2, 3, 2, with)), obs_w.len());
+
+        // And the arm joint angles after it, as they were given (f32).
+        let both = ObservationOptions {
+            base_angular_velocity: true,
+            arm_joint_angles: true,
+        };
+        let obs_b = build(&state, both);
+        assert_eq!(obs_b[..obs_w.len()], obs_w[..]);
+        assert_eq!(obs_b[obs_w.len()..], [0.25, -0.5, 1.0]);
+        assert_eq!(size(&slots(2, 3, 2, both)), obs_b.len());
+        let angles_only = ObservationOptions {
+            arm_joint_angles: true,
+            ..Default::default()
+        };
+        let obs_a = build(&state, angles_only);
+        assert_eq!(obs_a[..obs.len()], obs[..]);
+        assert_eq!(obs_a[obs.len()..], [0.25, -0.5, 1.0]);
     }
 
     #[test]
     fn options_read_back_from_the_description() {
         let with = ObservationOptions {
             base_angular_velocity: true,
+            ..Default::default()
         };
-        for options in [ObservationOptions::default(), with] {
-            let text = describe(&slots(6, 18, options));
+        let angles = ObservationOptions {
+            arm_joint_angles: true,
+            ..Default::default()
+        };
+        let both = ObservationOptions {
+            base_angular_velocity: true,
+            arm_joint_angles: true,
+        };
+        for options in [ObservationOptions::default(), with, angles, both] {
+            let text = describe(&slots(6, 28, 18, options));
             assert_eq!(
                 ObservationOptions::from_description(&text),
                 options,
@@ -330,20 +380,20 @@ mod tests {
             );
         }
         assert!(!with.is_none() && ObservationOptions::default().is_none());
-        let near_miss = "base_angular_velocity_x:3:rad/s:base";
+        let near_miss = "base_angular_velocity_x:3:rad/s:base;arm_joint_positions:28:rad:joint";
         assert!(ObservationOptions::from_description(near_miss).is_none());
     }
 
     #[test]
     fn slots_describe_themselves() {
-        let text = describe(&slots(6, 18, ObservationOptions::default()));
+        let text = describe(&slots(6, 28, 18, ObservationOptions::default()));
         assert!(
             text.starts_with("base_linear_velocity:3:m/s:base;"),
             "{text}"
         );
         assert!(text.ends_with("wheel_velocities:6:rad/s:joint;previous_action:18:1:policy"));
         assert_eq!(
-            size(&slots(6, 18, ObservationOptions::default())),
+            size(&slots(6, 28, 18, ObservationOptions::default())),
             10 + 6 + 18
         );
     }

@@ -15,6 +15,7 @@ fn robot(name: &str) -> RobotModel {
 /// Table III's slots, no optional one.
 const NONE: ObservationOptions = ObservationOptions {
     base_angular_velocity: false,
+    arm_joint_angles: false,
 };
 
 const BOUNDS: GoalBounds = GoalBounds {
@@ -161,6 +162,7 @@ fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
     // differs first, and the description names the slot.
     let spinning = ObservationOptions {
         base_angular_velocity: true,
+        arm_joint_angles: false,
     };
     let with = contract::contract(&tricycle, &terms, spinning, b"skill-a", 30.0);
     assert_eq!(with[kumi_policies::metadata::OBSERVATION_DIM_KEY], "40");
@@ -171,6 +173,19 @@ fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
     );
     let description = &with[kumi_policies::metadata::OBSERVATION];
     assert_eq!(ObservationOptions::from_description(description), spinning);
+    // Observing the arm modules' joint angles too: four modules of 7 joints more.
+    let angles = ObservationOptions {
+        base_angular_velocity: true,
+        arm_joint_angles: true,
+    };
+    let with = contract::contract(&tricycle, &terms, angles, b"skill-a", 30.0);
+    assert_eq!(with[kumi_policies::metadata::OBSERVATION_DIM_KEY], "68");
+    let description = &with[kumi_policies::metadata::OBSERVATION];
+    assert!(
+        description.ends_with(";arm_joint_angles:28:rad:joint"),
+        "{description}"
+    );
+    assert_eq!(ObservationOptions::from_description(description), angles);
     let mut missing = trained.clone();
     missing.remove(contract::SKILL_FINGERPRINT);
     assert_eq!(
