@@ -106,6 +106,9 @@ pub fn run(args: CompareArgs) -> Result<()> {
                 trace: None,
                 traced: 0,
                 action_noise: 0.0,
+                push_m_s: 0.0,
+                push_tip_rad_s: 0.0,
+                push_interval_s: Vec::new(),
             })
             .with_context(|| format!("evaluating the {variant} policy of {robot}"))?;
             for evaluation in results.evaluations {

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use kumi_policies::goals::GoalDistribution;
 use kumi_policies::skill::ArmSkill;
@@ -12,6 +12,7 @@ use kumi_runtime::{BackendChoice, SkillPolicy, WholeBodyPolicy};
 use kumi_train::arm_reach::ArmReachConfig;
 use kumi_train::evaluate::evaluate;
 use kumi_train::evaluate_body::{Episode, Protocol, TraceStep};
+use kumi_train::whole_body::{PushConfig, WholeBodyConfig};
 
 use crate::sim::load_model;
 
@@ -76,6 +77,38 @@ pub struct EvalBodyArgs {
     /// 0 runs the deterministic policy.
     #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
     pub action_noise: f64,
+    /// Shove the robot as `[push]` does in training: its horizontal velocity jumps by x and y
+    /// each uniform in [-V, V] [m/s] every `--push-interval-s`: how the policy recovers. 0 (the
+    /// default, with `--push-tip-rad-s` 0) evaluates the task without pushes, whatever the
+    /// config's `[push]` says.
+    #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
+    pub push_m_s: f64,
+    /// With the pushes, the robot starts to tip about the world's x and y axes through its
+    /// base at rates each uniform in [-W, W] [rad/s].
+    #[arg(long, default_value_t = 0.0, value_parser = non_negative)]
+    pub push_tip_rad_s: f64,
+    /// The time between pushes [s], uniform in LO,HI.
+    #[arg(long, value_delimiter = ',', default_values_t = [4.0, 8.0])]
+    pub push_interval_s: Vec<f64>,
+}
+
+impl EvalBodyArgs {
+    /// The pushes to evaluate under (none unless `--push-m-s` asks).
+    fn push(&self) -> Result<Option<PushConfig>> {
+        if self.push_m_s == 0.0 && self.push_tip_rad_s == 0.0 {
+            return Ok(None);
+        }
+        let [lo, hi] = self.push_interval_s[..] else {
+            bail!("--push-interval-s takes two times, LO,HI [s]");
+        };
+        let push = PushConfig {
+            interval_s: [lo, hi],
+            velocity_m_s: self.push_m_s,
+            tip_rad_s: self.push_tip_rad_s,
+        };
+        push.check()?;
+        Ok(Some(push))
+    }
 }
 
 /// A finite number of at least 0.
@@ -235,7 +268,11 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
             args.rollouts
         );
         let start = Instant::now();
-        let config = file.environment(engine)?;
+        let config = WholeBodyConfig {
+            push: args.push()?,
+            replay: None, // training's: evaluation starts every episode afresh
+            ..file.environment(engine)?
+        };
         let result = kumi_train::evaluate_body::evaluate_body(
             model.clone(),
             config,
@@ -274,6 +311,13 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         file.task.target_z_m[1],
         args.seed,
     );
+    let header = match args.push()? {
+        Some(p) => format!(
+            "{header}- pushes: every {}-{} s the robot's horizontal velocity jumps by x and y each uniform in +-{} m/s, and its roll and pitch rates about its base by +-{} rad/s\n",
+            p.interval_s[0], p.interval_s[1], p.velocity_m_s, p.tip_rad_s
+        ),
+        None => header,
+    };
     Ok(BodyEvaluations {
         evaluations: results,
         header,

@@ -13,8 +13,9 @@ use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig};
 use kumi_train::body_reward::{BodyWeights, PenaltyWeights};
 use kumi_train::env::Environment;
 use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
+use kumi_train::replay::ReplayConfig;
 use kumi_train::reward::ReachWeights;
-use kumi_train::whole_body::{ArmControl, TaskConfig, WholeBody, WholeBodyConfig};
+use kumi_train::whole_body::{ArmControl, PushConfig, TaskConfig, WholeBody, WholeBodyConfig};
 
 /// The training config file: PPO hyperparameters, the reward's weights and the goals.
 #[derive(Debug, serde::Deserialize, serde::Serialize)]
@@ -220,6 +221,13 @@ pub struct TrainBodyConfig {
     /// hash then, so that policies trained before the section existed keep theirs).
     #[serde(default, skip_serializing_if = "ObservationOptions::is_none")]
     pub observation: ObservationOptions,
+    /// Random shoves in training (none when the section is absent, and out of the hash then).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub push: Option<PushConfig>,
+    /// Episodes replayed from before earlier ones tipped, in training (none when the section
+    /// is absent, and out of the hash then).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replay: Option<ReplayConfig>,
 }
 
 impl TrainBodyConfig {
@@ -242,6 +250,8 @@ impl TrainBodyConfig {
             penalty: self.penalty.unwrap_or_default(),
             arms: self.arms()?,
             observation: self.observation,
+            push: self.push,
+            replay: self.replay,
         })
     }
 
@@ -407,15 +417,28 @@ fn training_engine(args: &RunArgs) -> Result<kumi_worlds::Engine> {
     Ok(engine)
 }
 
-/// `metrics.csv` for writing. A resumed run goes on with the file of the run it resumes when it
-/// is there, without the rows past the checkpoint (a run that died after its last checkpoint
-/// wrote them, and will write them again); a new run starts it afresh.
-fn open_metrics(path: &std::path::Path, resumed: bool, iteration: usize) -> Result<std::fs::File> {
+/// `metrics.csv` for writing, its `header` written. A resumed run goes on with the file of the
+/// run it resumes when it is there, without the rows past the checkpoint (a run that died after
+/// its last checkpoint wrote them, and will write them again), unless that file has other
+/// columns (an error); a new run starts it afresh.
+fn open_metrics(
+    path: &std::path::Path,
+    resumed: bool,
+    iteration: usize,
+    header: &str,
+) -> Result<std::fs::File> {
     let kept = if resumed && path.exists() {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
         let mut lines = text.lines();
-        let mut kept: Vec<&str> = lines.next().into_iter().collect();
+        let columns = lines.next().unwrap_or(header);
+        if columns != header {
+            bail!(
+                "{} has the columns of another run ({columns}), and this run writes ({header}): resume into another --out",
+                path.display()
+            );
+        }
+        let mut kept = vec![header];
         kept.extend(lines.filter(|l| {
             l.split(',')
                 .next()
@@ -424,7 +447,7 @@ fn open_metrics(path: &std::path::Path, resumed: bool, iteration: usize) -> Resu
         }));
         kept.join("\n") + "\n"
     } else {
-        String::new()
+        format!("{header}\n")
     };
     std::fs::write(path, kept).with_context(|| format!("writing {}", path.display()))?;
     std::fs::OpenOptions::new()
@@ -459,10 +482,12 @@ fn train<E: Environment>(
         );
     }
     let csv_path = out.join("metrics.csv");
-    let mut csv = open_metrics(&csv_path, args.resume.is_some(), trainer.iteration)?;
-    if csv.metadata()?.len() == 0 {
-        writeln!(csv, "{}", header(metric_names))?;
-    }
+    let mut csv = open_metrics(
+        &csv_path,
+        args.resume.is_some(),
+        trainer.iteration,
+        &header(metric_names),
+    )?;
     let checkpoint = out.join("checkpoint");
     let start = Instant::now();
     eprintln!(
@@ -866,6 +891,58 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("base_angular_velocty"), "{err}");
+    }
+
+    #[test]
+    fn the_training_only_sections_are_optional_out_of_the_hash_when_absent_and_off_in_eval() {
+        // [push], [replay] and [ppo]'s critic_learning_rate change training, not the policy:
+        // absent, none is serialised, so every shipped policy keeps its config hash.
+        for (_, _, text) in SHIPPED_BODY_CONFIGS.iter().chain(&SHIPPED_LAST_STAGES) {
+            let plain: TrainBodyConfig = toml::from_str(text).unwrap();
+            assert!(plain.push.is_none() && plain.replay.is_none());
+            assert!(plain.ppo.critic_learning_rate.is_none());
+            let json = serde_json::to_string(&plain).unwrap();
+            for key in ["push", "replay", "critic_learning_rate"] {
+                assert!(!json.contains(key), "{key} in {json}");
+            }
+        }
+        let (_, _, text) = SHIPPED_BODY_CONFIGS[2];
+        let with = format!(
+            "{}\n[push]\ninterval_s = [3.0, 6.0]\nvelocity_m_s = 0.5\ntip_rad_s = 1.0\n\n[replay]\ntilt_rad = 0.3\nbefore_s = 1.5\nprobability = 0.15\ncapacity = 16\n",
+            text.replacen("\n[ppo]", "\n[ppo]\ncritic_learning_rate = 3e-4\n#", 1)
+        );
+        let config: TrainBodyConfig = toml::from_str(&with).unwrap();
+        assert_eq!(config.ppo.critic_learning_rate, Some(3e-4));
+        let env = config.environment(kumi_worlds::Engine::Rapier).unwrap();
+        assert_eq!(env.push.unwrap().tip_rad_s, 1.0);
+        assert_eq!(env.replay.unwrap().capacity, 16);
+        let typo = with.replace("tip_rad_s", "tip_rads");
+        let err = toml::from_str::<TrainBodyConfig>(&typo)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("tip_rads"), "{err}");
+    }
+
+    #[test]
+    fn a_resumed_run_refuses_a_metrics_file_of_other_columns() {
+        let dir = std::env::temp_dir().join(format!("kumi-metrics-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("metrics.csv");
+        std::fs::write(&path, "iteration,a\n1,0.5\n2,0.6\n3,0.7\n").unwrap();
+        // The same columns: the rows up to the checkpoint's iteration stay.
+        drop(open_metrics(&path, true, 2, "iteration,a").unwrap());
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            "iteration,a\n1,0.5\n2,0.6\n"
+        );
+        let err = open_metrics(&path, true, 2, "iteration,a,b")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("another --out"), "{err}");
+        // A new run starts the file afresh with its own columns.
+        drop(open_metrics(&path, false, 0, "iteration,a,b").unwrap());
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "iteration,a,b\n");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -370,6 +370,8 @@ pub fn whole_body_config(
         penalty: Default::default(),
         arms: kumi_train::whole_body::ArmControl::Skill(bounds),
         observation: Default::default(),
+        push: None,
+        replay: None,
     }
 }
 

@@ -38,6 +38,14 @@ pub const BODY_METRICS: [&str; 3] = [
     "final_yaw_error_rad",
     "termination_rate",
 ];
+/// With `[replay]`: the same over fresh episodes only, and the fraction of replayed episodes
+/// that ended by a fall.
+pub const BODY_REPLAY_METRICS: [&str; 4] = [
+    "final_position_error_m",
+    "final_yaw_error_rad",
+    "termination_rate",
+    "replayed_termination_rate",
+];
 
 impl Environment for crate::arm_reach::ArmReach {
     fn observation_dim(&self) -> usize {
@@ -93,10 +101,13 @@ impl Environment for crate::whole_body::WholeBody {
     fn step(&mut self, action: &[f32]) -> Transition {
         let o = crate::whole_body::WholeBody::step(self, action);
         let mut metrics = Vec::new();
-        if o.terminated || o.truncated {
+        let ended = o.terminated || o.truncated;
+        if ended && o.replayed {
+            metrics.push((BODY_REPLAY_METRICS[3], f64::from(u8::from(o.terminated))));
+        } else if ended {
             metrics.push((BODY_METRICS[2], f64::from(u8::from(o.terminated))));
         }
-        if o.truncated && !o.terminated {
+        if o.truncated && !o.terminated && !o.replayed {
             metrics.push((BODY_METRICS[0], o.position_error));
             metrics.push((BODY_METRICS[1], o.yaw_error));
         }
@@ -110,6 +121,10 @@ impl Environment for crate::whole_body::WholeBody {
     }
 
     fn metric_names(&self) -> &'static [&'static str] {
-        &BODY_METRICS
+        if self.replays() {
+            &BODY_REPLAY_METRICS
+        } else {
+            &BODY_METRICS
+        }
     }
 }

@@ -12,5 +12,6 @@ pub mod evaluate_body;
 pub mod export;
 pub mod nn;
 pub mod ppo;
+pub mod replay;
 pub mod reward;
 pub mod whole_body;

@@ -19,7 +19,7 @@ use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy};
 use kumi_terms::action::{planar_twist, ActionTerms, GoalBounds, JointBounds, WheelRamp};
 use kumi_terms::observation::{self as body_obs, BodyState, ObservationOptions, Target, ToolChain};
-use kumi_worlds::{home_joint_positions, Engine, SimConfig, SimWorld};
+use kumi_worlds::{home_joint_positions, Engine, SimConfig, SimWorld, Snapshot};
 use nalgebra::{Isometry3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -30,6 +30,7 @@ use crate::body_reward::{
     tilt_penalty, turn_penalty, BodyTerms, BodyWeights, PenaltyWeights,
 };
 use crate::evaluate_body::{leg_angles, ContactRule};
+use crate::replay::{Replay, ReplayConfig};
 
 /// The task's settings per morphology (`[task]` in `train/configs/whole_body/*.toml`).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -65,6 +66,68 @@ impl TaskConfig {
     }
 }
 
+/// Random shoves in training (`[push]` in a whole-body config; none when absent): every
+/// `interval_s` [s] (uniform in the range) the whole robot's horizontal velocity jumps by x and y
+/// each uniform in [-`velocity_m_s`, `velocity_m_s`] [m/s], and it starts to tip about the
+/// world's x and y axes through its base at rates each uniform in [-`tip_rad_s`, `tip_rad_s`]
+/// [rad/s] ([`SimWorld::push`]). The policy meets the tilts and slides it would rarely meet on
+/// its own, and is paid to recover from them (legged_gym's `push_robots`, Isaac Lab's
+/// `push_by_setting_velocity` event).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PushConfig {
+    /// Time between pushes [s], uniform in [lo, hi]; the first comes that long after a reset.
+    pub interval_s: [f64; 2],
+    /// The largest change of each horizontal velocity component [m/s].
+    pub velocity_m_s: f64,
+    /// The largest change of each horizontal angular velocity component [rad/s].
+    pub tip_rad_s: f64,
+}
+
+impl PushConfig {
+    pub fn check(&self) -> Result<(), EnvError> {
+        let [lo, hi] = self.interval_s;
+        let speeds = [self.velocity_m_s, self.tip_rad_s];
+        let ok = lo > 0.0 && hi >= lo && hi.is_finite();
+        if ok && speeds.iter().all(|v| v.is_finite() && *v >= 0.0) {
+            Ok(())
+        } else {
+            Err(EnvError::Goals(format!(
+                "invalid [push]: the interval must be a positive range [lo, hi] [s], the \
+                 velocity [m/s] and the tip rate [rad/s] finite and >= 0: {self:?}"
+            )))
+        }
+    }
+
+    /// Control steps until the next push (at least 1), at `control_hz`.
+    pub fn steps_to_next(&self, control_hz: f64, rng: &mut impl Rng) -> usize {
+        let [lo, hi] = self.interval_s;
+        let interval_s = if hi > lo {
+            rng.random_range(lo..=hi)
+        } else {
+            lo
+        };
+        ((interval_s * control_hz).round() as usize).max(1)
+    }
+
+    /// One push: the base origin's velocity change [m/s] and the robot's angular velocity
+    /// change [rad/s], both horizontal and in the world frame, each component uniform.
+    pub fn draw(&self, rng: &mut impl Rng) -> (Vector3<f64>, Vector3<f64>) {
+        (
+            horizontal(self.velocity_m_s, rng),
+            horizontal(self.tip_rad_s, rng),
+        )
+    }
+}
+
+/// A horizontal vector whose x and y are each uniform in [-r, r] (zero, drawing nothing, for r 0).
+fn horizontal(r: f64, rng: &mut impl Rng) -> Vector3<f64> {
+    if r == 0.0 {
+        return Vector3::zeros();
+    }
+    Vector3::new(rng.random_range(-r..=r), rng.random_range(-r..=r), 0.0)
+}
+
 /// How the policy drives the arm modules.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ArmControl {
@@ -96,6 +159,10 @@ pub struct WholeBodyConfig {
     pub arms: ArmControl,
     /// Optional observation slots beyond Table III.
     pub observation: ObservationOptions,
+    /// Random shoves (training; none: the task as the paper sets it).
+    pub push: Option<PushConfig>,
+    /// Episodes replayed from before earlier ones tipped (training; none: fresh starts only).
+    pub replay: Option<ReplayConfig>,
 }
 
 /// One arm module as its term drives it.
@@ -104,6 +171,17 @@ struct ArmIo {
     skill: ArmSkill,
     /// Its joints in the world's actuator vectors.
     joints: Range<usize>,
+}
+
+/// Everything an episode needs to go on from a step: the world, the target, the previous
+/// action, the wheels' ramp and the step count.
+#[derive(Clone)]
+struct Moment {
+    world: Snapshot,
+    target: Target,
+    previous_action: Vec<f32>,
+    wheel_ramp: WheelRamp,
+    step: usize,
 }
 
 /// What one step produced.
@@ -118,6 +196,8 @@ pub struct BodyStep {
     /// Tool position error [m] and absolute yaw error [rad] to the target after this step.
     pub position_error: f64,
     pub yaw_error: f64,
+    /// The episode started from a replayed moment, not a fresh start ([`ReplayConfig`]).
+    pub replayed: bool,
 }
 
 /// One robot reaching targets with its manipulator, over the frozen skill.
@@ -142,6 +222,13 @@ pub struct WholeBody {
     /// The wheel commands' rate limit (the policy's wheel acceleration).
     wheel_ramp: WheelRamp,
     step: usize,
+    /// The step at which the next push comes (none without `[push]`).
+    next_push: Option<usize>,
+    control_hz: f64,
+    /// Moments kept to replay (none without `[replay]`).
+    replay: Option<Replay<Moment>>,
+    /// This episode started from a replayed moment.
+    replayed: bool,
 }
 
 impl WholeBody {
@@ -155,6 +242,12 @@ impl WholeBody {
         seed: u64,
     ) -> Result<Self, EnvError> {
         config.task.check()?;
+        if let Some(push) = &config.push {
+            push.check()?;
+        }
+        if let Some(replay) = &config.replay {
+            replay.check().map_err(EnvError::Goals)?;
+        }
         let manipulators: Vec<_> = model.modules_with_role(Role::Manipulator).collect();
         let [manipulator] = manipulators.as_slice() else {
             return Err(EnvError::Goals(format!(
@@ -198,6 +291,7 @@ impl WholeBody {
             .map(|(i, _)| i)
             .collect();
         let episode_steps = (config.task.episode_s * sim.control_hz).round() as usize;
+        let replay = config.replay;
         let mut env = Self {
             previous_action: vec![0.0; terms.size()],
             wheel_ramp: WheelRamp::new(&terms, sim.control_hz),
@@ -218,9 +312,18 @@ impl WholeBody {
                 yaw: 0.0,
             },
             step: 0,
+            next_push: None,
+            control_hz: sim.control_hz,
+            replay: replay.map(|r| Replay::new(r, sim.control_hz)),
+            replayed: false,
         };
         env.reset();
         Ok(env)
+    }
+
+    /// Whether episodes may start from replayed moments (`[replay]`).
+    pub fn replays(&self) -> bool {
+        self.replay.is_some()
     }
 
     /// The action terms (their size is the action's).
@@ -277,8 +380,30 @@ impl WholeBody {
         self.rng = ChaCha8Rng::seed_from_u64(seed);
     }
 
-    /// Starts an episode: the robot at home, standing at a random pose; a random target.
+    /// Starts an episode: the robot at home, standing at a random pose; a random target. With
+    /// `[replay]`, sometimes a moment kept from before an earlier episode tipped instead.
     pub fn reset(&mut self) -> Vec<f32> {
+        let replayed = match &self.replay {
+            Some(replay) => replay.draw_start(&mut self.rng),
+            None => None,
+        };
+        self.replayed = replayed.is_some();
+        match replayed {
+            Some(moment) => self.resume(moment),
+            None => self.fresh_start(),
+        }
+        if self.replay.is_some() {
+            let first = self.moment();
+            if let Some(replay) = self.replay.as_mut() {
+                replay.start_episode(first);
+            }
+        }
+        self.next_push = self.push_after(self.step);
+        self.observation()
+    }
+
+    /// The robot at home, standing at a random pose; a random target.
+    fn fresh_start(&mut self) {
         let t = self.config.task;
         let r = t.initial_xy_m;
         let (x, y) = (self.uniform(-r, r), self.uniform(-r, r));
@@ -299,7 +424,46 @@ impl WholeBody {
         self.previous_action.iter_mut().for_each(|a| *a = 0.0);
         self.wheel_ramp.stop();
         self.step = 0;
-        self.observation()
+    }
+
+    /// The episode as it is now, to go on from later.
+    fn moment(&self) -> Moment {
+        Moment {
+            world: self.world.snapshot(),
+            target: self.target,
+            previous_action: self.previous_action.clone(),
+            wheel_ramp: self.wheel_ramp.clone(),
+            step: self.step,
+        }
+    }
+
+    /// Goes on from a kept moment.
+    fn resume(&mut self, moment: Moment) {
+        self.world
+            .restore(&moment.world)
+            .expect("moments are taken from this world");
+        self.target = moment.target;
+        self.previous_action = moment.previous_action;
+        self.wheel_ramp = moment.wheel_ramp;
+        self.step = moment.step;
+    }
+
+    /// The step of the next push after `step` (none without `[push]`).
+    fn push_after(&mut self, step: usize) -> Option<usize> {
+        let push = self.config.push?;
+        Some(step + push.steps_to_next(self.control_hz, &mut self.rng))
+    }
+
+    /// Pushes the robot if this step is due one, and schedules the next.
+    fn push_if_due(&mut self) {
+        let Some(push) = self.config.push else {
+            return;
+        };
+        if self.next_push == Some(self.step) {
+            let (delta_v_w, delta_w_w) = push.draw(&mut self.rng);
+            self.world.push(&delta_v_w, &delta_w_w);
+            self.next_push = self.push_after(self.step);
+        }
     }
 
     fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
@@ -411,6 +575,7 @@ impl WholeBody {
                 .set_wheel_velocity(module, *v)
                 .expect("a wheel module");
         }
+        self.push_if_due();
         self.world.step();
         self.step += 1;
 
@@ -448,6 +613,12 @@ impl WholeBody {
             terms.rock = rock_penalty(self.config.weights.rock, &w_b);
         }
         let terminated = self.world.diverged() || fell;
+        if self.replay.is_some() && !self.world.diverged() {
+            let (moment, tilt_rad) = (self.moment(), tilt(&self.world.base_pose().rotation));
+            if let Some(replay) = self.replay.as_mut() {
+                replay.record(moment, tilt_rad);
+            }
+        }
         BodyStep {
             observation: self.observation(),
             reward: terms.total(),
@@ -456,6 +627,7 @@ impl WholeBody {
             truncated: self.step >= self.episode_steps,
             position_error,
             yaw_error,
+            replayed: self.replayed,
         }
     }
 }
@@ -489,4 +661,65 @@ fn load_skill(bytes: &[u8], arms: &[ArmIo]) -> Result<SkillPolicy, EnvError> {
             .map_err(|e| EnvError::Goals(format!("skill for module `{}`: {e}", arm.module)))?;
     }
     Ok(skill)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const PUSH: PushConfig = PushConfig {
+        interval_s: [2.0, 4.0],
+        velocity_m_s: 0.5,
+        tip_rad_s: 0.3,
+    };
+
+    #[test]
+    fn pushes_come_within_their_interval_and_bounds() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let (mut shortest, mut longest) = (usize::MAX, 0);
+        for _ in 0..2000 {
+            let steps = PUSH.steps_to_next(30.0, &mut rng);
+            (shortest, longest) = (shortest.min(steps), longest.max(steps));
+            let (dv, dw) = PUSH.draw(&mut rng);
+            assert_eq!((dv.z, dw.z), (0.0, 0.0), "pushes are horizontal");
+            assert!(dv.x.abs() <= 0.5 && dv.y.abs() <= 0.5, "{dv:?}");
+            assert!(dw.x.abs() <= 0.3 && dw.y.abs() <= 0.3, "{dw:?}");
+        }
+        // 2-4 s at 30 Hz, both ends reached over 2000 draws.
+        assert_eq!((shortest, longest), (60, 120));
+    }
+
+    #[test]
+    fn a_push_comes_at_least_one_step_on_and_a_zero_push_is_none() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let soon = PushConfig {
+            interval_s: [0.001, 0.001],
+            velocity_m_s: 0.0,
+            tip_rad_s: 0.0,
+        };
+        assert_eq!(soon.steps_to_next(30.0, &mut rng), 1);
+        assert_eq!(soon.draw(&mut rng), (Vector3::zeros(), Vector3::zeros()));
+    }
+
+    #[test]
+    fn bad_push_settings_are_refused() {
+        for (interval_s, velocity_m_s, tip_rad_s) in [
+            ([0.0, 1.0], 0.5, 0.1),
+            ([2.0, 1.0], 0.5, 0.1),
+            ([1.0, f64::INFINITY], 0.5, 0.1),
+            ([1.0, 2.0], -0.1, 0.1),
+            ([1.0, 2.0], f64::NAN, 0.1),
+            ([1.0, 2.0], 0.5, -0.1),
+            ([1.0, 2.0], 0.5, f64::INFINITY),
+        ] {
+            let push = PushConfig {
+                interval_s,
+                velocity_m_s,
+                tip_rad_s,
+            };
+            let error = push.check().unwrap_err().to_string();
+            assert!(error.contains("[push]"), "{error}");
+        }
+        PUSH.check().unwrap();
+    }
 }

@@ -110,6 +110,12 @@ pub trait SimWorld: Send {
     fn restore(&mut self, snapshot: &Snapshot) -> Result<(), SimError>;
     /// Advances one control step (`substeps` physics steps).
     fn step(&mut self);
+    /// Shoves the robot as one rigid body: its base link's origin gains `delta_v_w` [m/s] and
+    /// the whole robot the angular velocity `delta_w_w` [rad/s] about that origin (both in the
+    /// world frame), every link at once, joint velocities unchanged (the push of legged_gym's and
+    /// Isaac Lab's `push_by_setting_velocity`, done in place). The robot's servos and the ground
+    /// take it from there. Fixed-base robots do not move.
+    fn push(&mut self, delta_v_w: &Vector3<f64>, delta_w_w: &Vector3<f64>);
 
     /// Joint positions [rad], in actuator order.
     fn joint_positions(&self) -> Vec<f64>;

@@ -312,6 +312,20 @@ impl SimWorld for MujocoWorld {
         self.time_s += 1.0 / self.config.control_hz;
     }
 
+    fn push(&mut self, delta_v_w: &Vector3<f64>, delta_w_w: &Vector3<f64>) {
+        if self.model.fixed_base {
+            return;
+        }
+        // The free joint's velocities: its origin's linear velocity in the world frame, then its
+        // angular velocity in its own frame; every body of the one tree hanging off it follows.
+        let body = self.links[self.base_link].0;
+        let delta_w_b = quat_wxyz(&self.data.xquat()[body]).inverse() * delta_w_w;
+        let delta = delta_v_w.iter().chain(delta_w_b.iter());
+        for (v, d) in self.data.qvel_mut()[..6].iter_mut().zip(delta) {
+            *v += d;
+        }
+    }
+
     fn joint_positions(&self) -> Vec<f64> {
         self.joints
             .iter()

@@ -11,7 +11,7 @@ use kumi_model::RobotModel;
 use nalgebra::{Isometry3, Vector3};
 use rapier3d::prelude::*;
 
-use crate::convert::{to_na_isometry, to_na_vector, to_rapier_pose};
+use crate::convert::{to_na_isometry, to_na_vector, to_rapier_pose, to_rapier_vector};
 use crate::spawn::{link_pose, place_body, spawn, ArticulatedJoint, LinkBody};
 
 /// Everything needed to restore rapier's physics exactly as it was.
@@ -288,6 +288,51 @@ impl SimWorld for World {
             self.physics.step();
         }
         self.time_s += 1.0 / self.config.control_hz;
+    }
+
+    /// Adds the push to the free root of every multibody (each module's tree, mounts being
+    /// impulse joints between them), and to every body's own velocity so that reads agree
+    /// before the next step. A free root's velocities are its centre of mass's linear velocity
+    /// and its angular velocity, both in the world frame.
+    fn push(&mut self, delta_v_w: &Vector3<f64>, delta_w_w: &Vector3<f64>) {
+        if self.model.fixed_base {
+            return;
+        }
+        let origin = self.base_pose().translation.vector;
+        // The change of a point's velocity [m/s] where the robot turns about the base origin.
+        let at = |point: Vector3<f64>| delta_v_w + delta_w_w.cross(&(point - origin));
+        let dw = to_rapier_vector(delta_w_w);
+        for root in &self.multibody_roots {
+            let com = to_na_vector(self.physics.bodies[*root].center_of_mass());
+            let dv = to_rapier_vector(&at(com));
+            let id = *self
+                .physics
+                .multibody_joints
+                .rigid_body_link(*root)
+                .expect("multibody root");
+            let mb = self
+                .physics
+                .multibody_joints
+                .get_multibody_mut(id.multibody)
+                .expect("multibody exists");
+            if mb.root().joint().ndofs() == 6 {
+                let mut v = mb.generalized_velocity_mut();
+                for k in 0..3 {
+                    v[k] += dv[k];
+                    v[k + 3] += dw[k];
+                }
+            }
+        }
+        let bodies: std::collections::HashSet<_> = self.links.iter().map(|l| l.body).collect();
+        for handle in bodies {
+            let rb = &mut self.physics.bodies[handle];
+            if rb.is_dynamic() {
+                let dv = to_rapier_vector(&at(to_na_vector(rb.center_of_mass())));
+                let (v, w) = (rb.linvel() + dv, rb.angvel() + dw);
+                rb.set_linvel(v, true);
+                rb.set_angvel(w, true);
+            }
+        }
     }
 
     /// Joint positions [rad], in actuator order.

@@ -30,6 +30,12 @@ impl<T: Real> Adam<T> {
 
     /// One update of every group: `params[g] -= lr m_hat / (sqrt(v_hat) + eps)`.
     pub fn update(&mut self, params: &mut [&mut [T]], grads: &[&[T]]) {
+        self.update_with(params, grads, &[]);
+    }
+
+    /// As [`Adam::update`], with group `g` at `rates[g]` where given (`Some`) instead of
+    /// `learning_rate`.
+    pub fn update_with(&mut self, params: &mut [&mut [T]], grads: &[&[T]], rates: &[Option<f64>]) {
         assert_eq!(params.len(), self.first.len(), "parameter groups");
         assert_eq!(grads.len(), self.first.len(), "gradient groups");
         self.step += 1;
@@ -37,10 +43,12 @@ impl<T: Real> Adam<T> {
         let (b1, b2) = (T::of(BETA1), T::of(BETA2));
         let (c1, c2) = (T::one() - b1, T::one() - b2);
         // Bias corrections folded into the step size, computed in f64.
-        let step_size = T::of(self.learning_rate / (1.0 - BETA1.powi(t)));
+        let correction = 1.0 - BETA1.powi(t);
         let root_correction = T::of((1.0 - BETA2.powi(t)).sqrt());
         let eps = T::of(EPSILON);
         for g in 0..params.len() {
+            let rate = rates.get(g).copied().flatten();
+            let step_size = T::of(rate.unwrap_or(self.learning_rate) / correction);
             let (m, v) = (&mut self.first[g], &mut self.second[g]);
             assert_eq!(params[g].len(), m.len(), "group {g} size");
             assert_eq!(grads[g].len(), m.len(), "group {g} gradient size");
@@ -56,6 +64,24 @@ impl<T: Real> Adam<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_group_may_step_at_its_own_rate() {
+        // Step 1 moves each parameter by its rate (g / |g| = 1): group 0 at the shared 0.1,
+        // group 1 at its own 0.5; the moments are the same either way.
+        let mut adam = Adam::<f64>::new(0.1, &[1, 1]);
+        let (mut a, mut b) = (vec![1.0], vec![1.0]);
+        adam.update_with(&mut [&mut a, &mut b], &[&[2.0], &[2.0]], &[None, Some(0.5)]);
+        assert!(
+            (a[0] - 0.9).abs() < 1e-7 && (b[0] - 0.5).abs() < 1e-7,
+            "{a:?} {b:?}"
+        );
+        assert_eq!(adam.first[0], adam.first[1]);
+        let mut same = Adam::<f64>::new(0.1, &[1, 1]);
+        let (mut c, mut d) = (vec![1.0], vec![1.0]);
+        same.update(&mut [&mut c, &mut d], &[&[2.0], &[2.0]]);
+        assert_eq!((c[0], d[0]), (a[0], a[0]), "update is update_with no rates");
+    }
 
     #[test]
     fn first_steps_by_hand() {

@@ -67,6 +67,12 @@ pub struct PpoConfig {
     /// config when unset; 0 is refused (leave it out).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bound_loss_coef: Option<f64>,
+    /// When set, the critic learns at this fixed rate (annealed with the rest) instead of the
+    /// actor's: the adaptive rate follows the policy's KL divergence, which says nothing of how
+    /// well the values fit, and held at its floor it left the critic's loss at 15-110 late in
+    /// Tricycle's training. Left out of the serialised config when unset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub critic_learning_rate: Option<f64>,
 }
 
 fn one() -> f64 {
@@ -123,6 +129,13 @@ impl PpoConfig {
         {
             return Err("anneal_after must lie in [0, 1] and anneal_final be positive".into());
         }
+        if let Some(rate) = self.critic_learning_rate {
+            if !(rate.is_finite() && rate > 0.0) {
+                return Err(format!(
+                    "critic_learning_rate ({rate}) must be finite and > 0 (leave it out for the actor's)"
+                ));
+            }
+        }
         if let Some(c) = self.bound_loss_coef {
             if !(c.is_finite() && c > 0.0) {
                 return Err(format!(
@@ -169,6 +182,7 @@ impl Default for PpoConfig {
             anneal_final: 1.0,
             final_log_std: None,
             bound_loss_coef: None,
+            critic_learning_rate: None,
         }
     }
 }
@@ -368,6 +382,16 @@ impl Learner {
         })
     }
 
+    /// Each parameter group's own learning rate (in [`ActorCritic::groups`]' order), where it
+    /// has one: the critic's, when `critic_learning_rate` is set.
+    fn group_rates(&self, anneal: f64) -> [Option<f64>; 3] {
+        [
+            None,
+            self.config.critic_learning_rate.map(|r| r * anneal),
+            None,
+        ]
+    }
+
     /// Epochs of shuffled minibatch steps; returns the mean loss parts.
     pub fn update(&mut self, data: &Batch, env_steps: u64) -> Loss {
         let (d, a) = (self.net.actor.inputs(), self.net.log_std.len());
@@ -407,8 +431,9 @@ impl Learner {
                     },
                 };
                 let (loss, gradient) = self.net.loss_and_gradient(&batch, &coefficients);
+                let rates = self.group_rates(anneal);
                 self.optimizer
-                    .update(&mut self.net.groups_mut(), &gradient.groups());
+                    .update_with(&mut self.net.groups_mut(), &gradient.groups(), &rates);
                 if self.config.desired_kl > 0.0 {
                     self.optimizer.learning_rate = adapt_learning_rate(
                         self.optimizer.learning_rate,
@@ -826,8 +851,9 @@ mod tests {
         assert!(serde_json::to_string(&set)
             .unwrap()
             .contains("\"final_log_std\":-1.9"));
-        // Nor does an unset bound loss.
+        // Nor does an unset bound loss, or an unset critic rate.
         assert!(!text.contains("bound_loss_coef"), "{text}");
+        assert!(!text.contains("critic_learning_rate"), "{text}");
     }
 
     #[test]
@@ -877,6 +903,14 @@ mod tests {
                 bound_loss_coef: Some(0.0), // as unset, but a different fingerprint
                 ..PpoConfig::default()
             },
+            PpoConfig {
+                critic_learning_rate: Some(0.0),
+                ..PpoConfig::default()
+            },
+            PpoConfig {
+                critic_learning_rate: Some(f64::INFINITY),
+                ..PpoConfig::default()
+            },
         ] {
             assert!(bad.check().is_err(), "{bad:?}");
         }
@@ -888,6 +922,25 @@ mod tests {
         assert_eq!(gather(&xs, 2, &[2, 0]), vec![5.0, 6.0, 1.0, 2.0]);
         let z = standardize(&[1.0, 3.0]);
         assert_eq!(z, vec![-1.0, 1.0]);
+    }
+
+    #[test]
+    fn the_critic_keeps_its_own_rate_annealed_and_the_rest_the_shared_one() {
+        let c = PpoConfig {
+            total_steps: 1000,
+            anneal_after: 0.6,
+            anneal_final: 0.1,
+            critic_learning_rate: Some(3e-4),
+            ..PpoConfig::default()
+        };
+        let mut rng = rand::SeedableRng::seed_from_u64(0);
+        let learner = super::Learner::new(c.clone(), 4, 2, &mut rng).unwrap();
+        let rates = learner.group_rates(c.anneal(800));
+        assert_eq!(rates[0], None, "the actor at the shared rate");
+        assert!((rates[1].unwrap() - 3e-4 * 0.55).abs() < 1e-15);
+        assert_eq!(rates[2], None, "the noise at the shared rate");
+        let shared = super::Learner::new(PpoConfig::default(), 4, 2, &mut rng).unwrap();
+        assert_eq!(shared.group_rates(1.0), [None; 3]);
     }
 
     #[test]
