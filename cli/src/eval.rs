@@ -313,7 +313,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
     );
     let header = match args.push()? {
         Some(p) => format!(
-            "{header}- pushes: every {}-{} s the robot's horizontal velocity jumps by x and y each uniform in +-{} m/s, and its roll and pitch rates about its base by +-{} rad/s\n",
+            "{header}- pushes: every {}-{} s the robot's horizontal velocity jumps by x and y each uniform in +-{} m/s, and its angular velocity about the world's x and y axes by +-{} rad/s\n",
             p.interval_s[0], p.interval_s[1], p.velocity_m_s, p.tip_rad_s
         ),
         None => header,

@@ -18,29 +18,33 @@ pub struct ReplayConfig {
     /// An episode whose base tilts past this [rad] has its moment from `before_s` earlier kept
     /// (once per episode).
     pub tilt_rad: f64,
-    /// How long before that tilt the kept moment was [s] (the episode's start if it is younger).
+    /// How long before that tilt the kept moment was [s] (the episode's start if it is younger,
+    /// unless that start was itself a kept moment: a replay does not keep its own start again).
     pub before_s: f64,
-    /// The chance, in [0, 1], that a reset starts from a kept moment when there is one.
+    /// The chance, in [0, 1), that a reset starts from a kept moment when there is one (below 1,
+    /// so that fresh starts, and the task's figures measured on them, go on).
     pub probability: f64,
     /// Moments kept per environment; past it the oldest goes.
     pub capacity: usize,
 }
 
 impl ReplayConfig {
-    /// Refuses settings that cannot work, naming them.
-    pub fn check(&self) -> Result<(), String> {
+    /// Refuses settings that cannot work, naming them: `tilt_limit_rad` is the task's, where
+    /// an episode ends (a tilt at or past it is never seen standing).
+    pub fn check(&self, tilt_limit_rad: f64) -> Result<(), String> {
         let ok = self.tilt_rad > 0.0
-            && self.tilt_rad.is_finite()
+            && self.tilt_rad < tilt_limit_rad
             && self.before_s >= 0.0
             && self.before_s.is_finite()
-            && (0.0..=1.0).contains(&self.probability)
+            && (0.0..1.0).contains(&self.probability)
             && self.capacity > 0;
         if ok {
             Ok(())
         } else {
             Err(format!(
-                "invalid [replay]: tilt_rad must be positive [rad], before_s at least 0 [s], \
-                 probability within [0, 1] and capacity at least 1: {self:?}"
+                "invalid [replay]: tilt_rad must be positive and below the task's tilt limit \
+                 ({tilt_limit_rad} rad), before_s at least 0 [s], probability within [0, 1) and \
+                 capacity at least 1: {self:?}"
             ))
         }
     }
@@ -57,6 +61,9 @@ pub struct Replay<M> {
     history: VecDeque<M>,
     kept: VecDeque<M>,
     kept_this_episode: bool,
+    /// Whether the episode started from a kept moment and that start is still the window's
+    /// oldest moment.
+    replayed_start_in_window: bool,
 }
 
 impl<M: Clone> Replay<M> {
@@ -67,25 +74,32 @@ impl<M: Clone> Replay<M> {
             history: VecDeque::new(),
             kept: VecDeque::new(),
             kept_this_episode: false,
+            replayed_start_in_window: false,
         }
     }
 
-    /// An episode starts at `first` (a fresh start or a replayed one).
-    pub fn start_episode(&mut self, first: M) {
+    /// An episode starts at `first`: a fresh start, or a kept moment (`replayed`).
+    pub fn start_episode(&mut self, first: M, replayed: bool) {
         self.history.clear();
         self.history.push_back(first);
         self.kept_this_episode = false;
+        self.replayed_start_in_window = replayed;
     }
 
     /// The episode has reached `moment`, its base tilted by `tilt_rad`: the moment from
-    /// `before_s` earlier is kept the first time the tilt passes the limit.
+    /// `before_s` earlier is kept the first time the tilt passes the limit (unless it is the
+    /// replayed start, kept already).
     pub fn record(&mut self, moment: M, tilt_rad: f64) {
         self.history.push_back(moment);
         if self.history.len() > self.window {
             self.history.pop_front();
+            self.replayed_start_in_window = false;
         }
         if tilt_rad >= self.config.tilt_rad && !self.kept_this_episode {
             self.kept_this_episode = true;
+            if self.replayed_start_in_window {
+                return;
+            }
             let earlier = self.history.front().expect("just pushed").clone();
             self.kept.push_back(earlier);
             if self.kept.len() > self.config.capacity {
@@ -123,9 +137,19 @@ mod tests {
         capacity: 2,
     };
 
-    /// An episode of `steps` steps (moments numbered from `start`) tilting at `tilt` from `tip`.
+    /// A fresh episode of `steps` steps (moments numbered from `start`) tilting from `tip`.
     fn episode(replay: &mut Replay<usize>, start: usize, steps: usize, tip: usize) {
-        replay.start_episode(start);
+        replayed_episode(replay, start, steps, tip, false);
+    }
+
+    fn replayed_episode(
+        replay: &mut Replay<usize>,
+        start: usize,
+        steps: usize,
+        tip: usize,
+        replayed: bool,
+    ) {
+        replay.start_episode(start, replayed);
         for step in 1..=steps {
             let tilt = if step >= tip { 0.4 } else { 0.1 };
             replay.record(start + step, tilt);
@@ -149,6 +173,23 @@ mod tests {
             replay.kept.iter().copied().collect::<Vec<_>>(),
             [1000, 3001]
         );
+    }
+
+    #[test]
+    fn a_replayed_start_is_not_kept_again() {
+        let mut replay = Replay::new(CONFIG, 30.0);
+        episode(&mut replay, 0, 100, 50);
+        // Replayed from moment 20 and tipping within 1 s: its start is kept already.
+        replayed_episode(&mut replay, 20, 100, 25, true);
+        assert_eq!(replay.kept.iter().copied().collect::<Vec<_>>(), [20]);
+        // Tipping later, the moment 1 s before is a new one.
+        replayed_episode(&mut replay, 20, 100, 40, true);
+        assert_eq!(replay.kept.iter().copied().collect::<Vec<_>>(), [20, 30]);
+        // Exactly 1 s after a replayed start, the window's oldest moment is that start.
+        replayed_episode(&mut replay, 500, 100, 30, true);
+        assert_eq!(replay.kept.iter().copied().collect::<Vec<_>>(), [20, 30]);
+        replayed_episode(&mut replay, 500, 100, 31, true);
+        assert_eq!(replay.kept.iter().copied().collect::<Vec<_>>(), [30, 501]);
     }
 
     #[test]
@@ -190,7 +231,11 @@ mod tests {
                 ..CONFIG
             },
             ReplayConfig {
-                probability: 1.5,
+                probability: 1.0,
+                ..CONFIG
+            },
+            ReplayConfig {
+                tilt_rad: 0.785,
                 ..CONFIG
             },
             ReplayConfig {
@@ -202,9 +247,9 @@ mod tests {
                 ..CONFIG
             },
         ] {
-            let error = bad.check().unwrap_err();
+            let error = bad.check(0.785).unwrap_err();
             assert!(error.contains("[replay]"), "{error}");
         }
-        CONFIG.check().unwrap();
+        CONFIG.check(0.785).unwrap();
     }
 }

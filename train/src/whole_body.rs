@@ -246,7 +246,9 @@ impl WholeBody {
             push.check()?;
         }
         if let Some(replay) = &config.replay {
-            replay.check().map_err(EnvError::Goals)?;
+            replay
+                .check(config.task.tilt_limit_rad)
+                .map_err(EnvError::Goals)?;
         }
         let manipulators: Vec<_> = model.modules_with_role(Role::Manipulator).collect();
         let [manipulator] = manipulators.as_slice() else {
@@ -395,7 +397,7 @@ impl WholeBody {
         if self.replay.is_some() {
             let first = self.moment();
             if let Some(replay) = self.replay.as_mut() {
-                replay.start_episode(first);
+                replay.start_episode(first, self.replayed);
             }
         }
         self.next_push = self.push_after(self.step);
@@ -451,7 +453,8 @@ impl WholeBody {
     /// The step of the next push after `step` (none without `[push]`).
     fn push_after(&mut self, step: usize) -> Option<usize> {
         let push = self.config.push?;
-        Some(step + push.steps_to_next(self.control_hz, &mut self.rng))
+        // Saturating: an interval past any episode's end (a push that never comes) is allowed.
+        Some(step.saturating_add(push.steps_to_next(self.control_hz, &mut self.rng)))
     }
 
     /// Pushes the robot if this step is due one, and schedules the next.

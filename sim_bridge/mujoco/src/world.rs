@@ -16,6 +16,15 @@ use crate::geometry::{lowest_z, GeomShape};
 use crate::mjcf::{self, quat_wxyz, GROUND_GEOM};
 use crate::servo::servo_command;
 
+/// The warnings MuJoCo raises when it finds non-finite or huge positions, velocities or
+/// accelerations and restarts the data from the model's initial state (`mj_checkPos`,
+/// `mj_checkVel`, `mj_checkAcc` in MuJoCo's `engine_forward.c`).
+const BLOW_UPS: [MjtWarning; 3] = [
+    MjtWarning::mjWARN_BADQPOS,
+    MjtWarning::mjWARN_BADQVEL,
+    MjtWarning::mjWARN_BADQACC,
+];
+
 /// One actuated joint in MuJoCo's arrays.
 #[derive(Debug, Clone, Copy)]
 struct ServoJoint {
@@ -35,6 +44,8 @@ struct MujocoState {
     physics: Box<[f64]>,
     servos: Vec<ServoState>,
     time_s: f64,
+    /// Whether the physics had blown up when it was taken.
+    diverged: bool,
 }
 
 /// What MuJoCo restores: time, positions, velocities, warm start, applied forces.
@@ -181,8 +192,12 @@ impl MujocoWorld {
                 j.joint_damping + command.damping;
         }
         self.data.step();
-        // MuJoCo counts bad accelerations (after restarting from its initial state).
-        if self.data.warning()[MjtWarning::mjWARN_BADQACC as usize].number > 0 {
+        // MuJoCo counts bad positions, velocities and accelerations (each after restarting
+        // from its initial state).
+        if BLOW_UPS
+            .iter()
+            .any(|&w| self.data.warning()[w as usize].number > 0)
+        {
             self.diverged = true;
         }
     }
@@ -278,6 +293,7 @@ impl SimWorld for MujocoWorld {
             physics: self.data.state(STATE_SPEC),
             servos: self.servos.states().to_vec(),
             time_s: self.time_s,
+            diverged: self.diverged,
         })
     }
 
@@ -294,6 +310,12 @@ impl SimWorld for MujocoWorld {
             .map_err(|_| SimError::ForeignSnapshot)?;
         self.servos.restore(&s.servos);
         self.time_s = s.time_s;
+        // MuJoCo's state leaves its warning counts alone: without this, a world that blew up
+        // after the snapshot would call the restored, sound state diverged on its next step.
+        for w in BLOW_UPS {
+            self.data.warning_mut()[w as usize].number = 0;
+        }
+        self.diverged = s.diverged;
         self.set_damping();
         self.data.forward();
         Ok(())

@@ -67,8 +67,8 @@ pub struct PpoConfig {
     /// config when unset; 0 is refused (leave it out).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bound_loss_coef: Option<f64>,
-    /// When set, the critic learns at this fixed rate (annealed with the rest) instead of the
-    /// actor's: the adaptive rate follows the policy's KL divergence, which says nothing of how
+    /// When set, the critic learns at this rate (times the schedule's annealing factor, as a
+    /// non-adaptive rate is) instead of the actor's: the adaptive rate follows the policy's KL divergence, which says nothing of how
     /// well the values fit, and held at its floor it left the critic's loss at 15-110 late in
     /// Tricycle's training. Left out of the serialised config when unset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
