@@ -213,6 +213,7 @@ impl BodyEvaluations {
 /// Evaluates the policy `args` names in each of its engines.
 pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
     anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
+    let push = args.push()?;
     let model = load_model(&args.morphology)?;
     let file = crate::train::read_shipped_policy_config(
         args.config.as_deref(),
@@ -269,7 +270,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         );
         let start = Instant::now();
         let config = WholeBodyConfig {
-            push: args.push()?,
+            push,
             replay: None, // training's: evaluation starts every episode afresh
             ..file.environment(engine)?
         };
@@ -311,7 +312,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         file.task.target_z_m[1],
         args.seed,
     );
-    let header = match args.push()? {
+    let header = match push {
         Some(p) => format!(
             "{header}- pushes: every {}-{} s the robot's horizontal velocity jumps by x and y each uniform in +-{} m/s, and its angular velocity about the world's x and y axes by +-{} rad/s\n",
             p.interval_s[0], p.interval_s[1], p.velocity_m_s, p.tip_rad_s

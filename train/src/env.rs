@@ -41,9 +41,9 @@ pub const BODY_METRICS: [&str; 3] = [
 /// With `[replay]`: the same over fresh episodes only, and the fraction of replayed episodes
 /// that ended by a fall.
 pub const BODY_REPLAY_METRICS: [&str; 4] = [
-    "final_position_error_m",
-    "final_yaw_error_rad",
-    "termination_rate",
+    BODY_METRICS[0],
+    BODY_METRICS[1],
+    BODY_METRICS[2],
     "replayed_termination_rate",
 ];
 

@@ -224,7 +224,6 @@ pub struct WholeBody {
     step: usize,
     /// The step at which the next push comes (none without `[push]`).
     next_push: Option<usize>,
-    control_hz: f64,
     /// Moments kept to replay (none without `[replay]`).
     replay: Option<Replay<Moment>>,
     /// This episode started from a replayed moment.
@@ -315,7 +314,6 @@ impl WholeBody {
             },
             step: 0,
             next_push: None,
-            control_hz: sim.control_hz,
             replay: replay.map(|r| Replay::new(r, sim.control_hz)),
             replayed: false,
         };
@@ -454,7 +452,8 @@ impl WholeBody {
     fn push_after(&mut self, step: usize) -> Option<usize> {
         let push = self.config.push?;
         // Saturating: an interval past any episode's end (a push that never comes) is allowed.
-        Some(step.saturating_add(push.steps_to_next(self.control_hz, &mut self.rng)))
+        let control_hz = self.world.config().control_hz;
+        Some(step.saturating_add(push.steps_to_next(control_hz, &mut self.rng)))
     }
 
     /// Pushes the robot if this step is due one, and schedules the next.

@@ -139,8 +139,9 @@ pub trait SimWorld: Send {
     fn body_poses(&self) -> Vec<(String, Isometry3<f64>)>;
 
     /// Whether the physics blew up since the last reset (MuJoCo detects non-finite or huge
-    /// positions, velocities or accelerations and restarts itself from its initial state when they happen; rapier never
-    /// reports it). A diverged world's state means nothing until the next reset.
+    /// positions, velocities or accelerations and restarts itself from its initial state when
+    /// they happen; rapier never reports it). A diverged world's state means nothing until the
+    /// next reset.
     fn diverged(&self) -> bool {
         false
     }

@@ -169,14 +169,7 @@ pub(crate) fn spawn(
     // Zero the floating bases' damping (rapier defaults every DoF to 0.1) and disable
     // contacts inside a multibody: a module's own links overlap at their joints.
     for root in &multibody_roots {
-        let link_id = *physics
-            .multibody_joints
-            .rigid_body_link(*root)
-            .expect("root of a multibody");
-        let mb = physics
-            .multibody_joints
-            .get_multibody_mut(link_id.multibody)
-            .expect("multibody exists");
+        let mb = root_multibody_mut(&mut physics.multibody_joints, *root);
         mb.set_self_contacts_enabled(false);
         let root_dofs = mb.root().joint().ndofs();
         for d in 0..root_dofs {
@@ -210,6 +203,19 @@ pub(crate) fn spawn(
         collider_links,
         ground,
     })
+}
+
+/// The multibody whose root link is the body `root` (one of [`Spawned::multibody_roots`]).
+pub(crate) fn root_multibody_mut(
+    multibody_joints: &mut MultibodyJointSet,
+    root: RigidBodyHandle,
+) -> &mut Multibody {
+    let link_id = *multibody_joints
+        .rigid_body_link(root)
+        .expect("root of a multibody");
+    multibody_joints
+        .get_multibody_mut(link_id.multibody)
+        .expect("multibody exists")
 }
 
 /// The pose of a link in the world [m, unit quaternion], from its body's pose.

@@ -12,7 +12,7 @@ use nalgebra::{Isometry3, Vector3};
 use rapier3d::prelude::*;
 
 use crate::convert::{to_na_isometry, to_na_vector, to_rapier_pose, to_rapier_vector};
-use crate::spawn::{link_pose, place_body, spawn, ArticulatedJoint, LinkBody};
+use crate::spawn::{link_pose, place_body, root_multibody_mut, spawn, ArticulatedJoint, LinkBody};
 
 /// Everything needed to restore rapier's physics exactly as it was.
 #[derive(Clone)]
@@ -224,16 +224,7 @@ impl SimWorld for World {
             link.joint.apply_displacement(&[q as f32 - current]);
         }
         for root in &self.multibody_roots {
-            let id = *self
-                .physics
-                .multibody_joints
-                .rigid_body_link(*root)
-                .expect("multibody root");
-            let mb = self
-                .physics
-                .multibody_joints
-                .get_multibody_mut(id.multibody)
-                .expect("multibody exists");
+            let mb = root_multibody_mut(&mut self.physics.multibody_joints, *root);
             mb.forward_kinematics(&self.physics.bodies, true);
             mb.update_rigid_bodies(&mut self.physics.bodies, true);
             mb.generalized_velocity_mut().fill(0.0);
@@ -307,16 +298,7 @@ impl SimWorld for World {
         for root in &self.multibody_roots {
             let com = to_na_vector(self.physics.bodies[*root].center_of_mass());
             let dv = to_rapier_vector(&at(com));
-            let id = *self
-                .physics
-                .multibody_joints
-                .rigid_body_link(*root)
-                .expect("multibody root");
-            let mb = self
-                .physics
-                .multibody_joints
-                .get_multibody_mut(id.multibody)
-                .expect("multibody exists");
+            let mb = root_multibody_mut(&mut self.physics.multibody_joints, *root);
             if mb.root().joint().ndofs() == 6 {
                 let mut v = mb.generalized_velocity_mut();
                 for k in 0..3 {

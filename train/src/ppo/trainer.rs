@@ -68,9 +68,10 @@ pub struct PpoConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bound_loss_coef: Option<f64>,
     /// When set, the critic learns at this rate (times the schedule's annealing factor, as a
-    /// non-adaptive rate is) instead of the actor's: the adaptive rate follows the policy's KL divergence, which says nothing of how
-    /// well the values fit, and held at its floor it left the critic's loss at 15-110 late in
-    /// Tricycle's training. Left out of the serialised config when unset.
+    /// non-adaptive rate is) instead of the actor's: the adaptive rate follows the policy's KL
+    /// divergence, which says nothing of how well the values fit, and held at its floor it
+    /// left the critic's loss at 15-110 late in Tricycle's training. Left out of the
+    /// serialised config when unset.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub critic_learning_rate: Option<f64>,
 }
@@ -406,6 +407,7 @@ impl Learner {
         if self.config.desired_kl <= 0.0 {
             self.optimizer.learning_rate = self.config.learning_rate * anneal;
         }
+        let rates = self.group_rates(anneal);
         let minibatch = total.div_ceil(self.config.minibatches);
         let mut indices: Vec<u32> = (0..total as u32).collect();
         let (mut sum, mut count) = (Loss::default(), 0.0);
@@ -431,7 +433,6 @@ impl Learner {
                     },
                 };
                 let (loss, gradient) = self.net.loss_and_gradient(&batch, &coefficients);
-                let rates = self.group_rates(anneal);
                 self.optimizer
                     .update_with(&mut self.net.groups_mut(), &gradient.groups(), &rates);
                 if self.config.desired_kl > 0.0 {
