@@ -54,6 +54,16 @@ fn send_target(domain: u16, robot: &str, extra: &[&str]) -> serde_json::Value {
     send_target_for(domain, robot, DRIVE_S, extra)
 }
 
+/// The `/diagnostics` status names of `robot`'s arm nodes for `modules`, comma-separated (the
+/// peer's `--expect`: it waits for a report from each after the drive).
+fn arm_statuses(robot: &str, modules: &[&str]) -> String {
+    modules
+        .iter()
+        .map(|m| format!("kumi arm node: {robot}/{m}"))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
 /// [`send_target`], watching `drive_s` simulated seconds.
 fn send_target_for(domain: u16, robot: &str, drive_s: f64, extra: &[&str]) -> serde_json::Value {
     let target = if robot == "tricycle" {
@@ -77,6 +87,11 @@ fn send_target_for(domain: u16, robot: &str, drive_s: f64, extra: &[&str]) -> se
     args.extend(extra);
     let out = peer(domain, &args, Duration::from_secs(120));
     assert!(out.get("error").is_none(), "{out}");
+    assert_eq!(
+        out["missing_diagnostics"],
+        serde_json::json!([]),
+        "nodes whose /diagnostics report never came after the drive: {out}"
+    );
     out
 }
 
@@ -281,7 +296,8 @@ fn modules_join_by_hand_robots_share_a_domain_duplicates_are_refused_and_a_dead_
     let second = launch(domain, &["minimal", "--robot", "second", "--lockstep"]);
     let mut last = serde_json::Value::Null;
     for robot in ["first", "second"] {
-        let out = send_target(domain, robot, &[]);
+        let expect = arm_statuses("first", &["arm0"]);
+        let out = send_target(domain, robot, &["--expect", &expect]);
         let error = number(&out["position_error_m"]);
         println!("{robot}: tool {error:.4} m from the target");
         assert!(error < 0.121, "{robot}: {out}");
@@ -370,7 +386,8 @@ fn reach_on_mujoco(robot: &str, arm_modules: &[&str]) -> (serde_json::Value, f64
             "tract",
         ],
     );
-    let out = send_target_for(domain, robot, 12.0, &[]);
+    let expect = arm_statuses(robot, arm_modules);
+    let out = send_target_for(domain, robot, 12.0, &["--expect", &expect]);
     let error = number(&out["position_error_m"]);
     let d = &out["diagnostics"];
     println!(
@@ -442,7 +459,11 @@ fn a_launched_minimal_reaches_a_target_in_real_time() {
     let _one = one_at_a_time();
     let domain = fresh_domain();
     let launch = launch(domain, &["minimal"]);
-    let out = send_target(domain, "minimal", &[]);
+    let expect = format!(
+        "{},kumi sim bridge: minimal",
+        arm_statuses("minimal", &["arm0"])
+    );
+    let out = send_target(domain, "minimal", &["--expect", &expect]);
     let error = number(&out["position_error_m"]);
     let all = &out["all_diagnostics"];
     let arm = &all["kumi arm node: minimal/arm0"];

@@ -421,16 +421,20 @@ def cmd_target(args, peer):
     start, wall = sim(), time.monotonic()
     target.publish(msg)
     peer.spin_until(lambda: sim() >= start + args.drive_seconds, args.timeout)
-    # Every node reports once per wall second: wait for a report from each one heard so far
-    # (and the whole-body node) sent after the drive, not one from before or during it.
+    # Every node reports once per wall second: wait for a report from each one heard so far,
+    # the whole-body node and every status named in --expect, sent after the drive (not one
+    # from before or during it). A loaded machine can delay a report by seconds, so the wait is
+    # long; it ends as soon as all have come.
     name = f"kumi whole-body node: {r}"
-    heard = set(statuses) | {name}
+    expected = {e for e in args.expect.split(",") if e}
+    heard = set(statuses) | {name} | expected
     statuses.clear()
-    peer.spin_until(lambda: heard <= set(statuses), 3.0)
+    peer.spin_until(lambda: heard <= set(statuses), 15.0)
     diagnostics = statuses.get(name, {})
     end = trajectory[-1] if trajectory else None
     return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall,
             "trajectory": trajectory, "diagnostics": diagnostics, "all_diagnostics": statuses,
+            "missing_diagnostics": sorted(heard - set(statuses)),
             "position_error_m": math.dist(end[1:4], [x, y, z]) if end else None,
             "yaw_error_rad": abs((yaw - end[4] + math.pi) % (2 * math.pi) - math.pi) if end else None}
 
@@ -894,6 +898,7 @@ def main():
     p.add_argument("--frame", default="")
     p.add_argument("--within", type=float, default=0.0)
     p.add_argument("--wall", action="store_true")
+    p.add_argument("--expect", default="", help="target: comma-separated /diagnostics status names to wait for after the drive")
     args = p.parse_args()
     if args.command == "latency":
         args.samples = int(args.samples or 50)
