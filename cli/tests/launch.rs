@@ -54,12 +54,17 @@ fn send_target(domain: u16, robot: &str, extra: &[&str]) -> serde_json::Value {
     send_target_for(domain, robot, DRIVE_S, extra)
 }
 
-/// The `/diagnostics` status names of `robot`'s arm nodes for `modules`, comma-separated (the
-/// peer's `--expect`: it waits for a report from each after the drive).
+/// The `/diagnostics` status name of the arm node of `robot`'s `module`, as it goes on the wire.
+fn arm_status(robot: &str, module: &str) -> String {
+    format!("kumi arm node: {robot}/{module}")
+}
+
+/// The [`arm_status`] names of `robot`'s `modules`, comma-separated (the peer's `--expect`: it
+/// waits for a report from each after the drive).
 fn arm_statuses(robot: &str, modules: &[&str]) -> String {
     modules
         .iter()
-        .map(|m| format!("kumi arm node: {robot}/{m}"))
+        .map(|m| arm_status(robot, m))
         .collect::<Vec<_>>()
         .join(",")
 }
@@ -295,8 +300,8 @@ fn modules_join_by_hand_robots_share_a_domain_duplicates_are_refused_and_a_dead_
     // `second`, a whole robot of its own on the same domain.
     let second = launch(domain, &["minimal", "--robot", "second", "--lockstep"]);
     let mut last = serde_json::Value::Null;
+    let expect = arm_statuses("first", &["arm0"]);
     for robot in ["first", "second"] {
-        let expect = arm_statuses("first", &["arm0"]);
         let out = send_target(domain, robot, &["--expect", &expect]);
         let error = number(&out["position_error_m"]);
         println!("{robot}: tool {error:.4} m from the target");
@@ -397,7 +402,7 @@ fn reach_on_mujoco(robot: &str, arm_modules: &[&str]) -> (serde_json::Value, f64
     );
     assert_eq!(number(&d["unsynchronised_ticks"]), 0.0, "{d}");
     for module in arm_modules {
-        let arm = &out["all_diagnostics"][format!("kumi arm node: {robot}/{module}")];
+        let arm = &out["all_diagnostics"][arm_status(robot, module)];
         assert_eq!(number(&arm["goals_rejected"]), 0.0, "{module}: {arm}");
         assert!(number(&arm["goals_accepted"]) > 300.0, "{module}: {arm}");
     }

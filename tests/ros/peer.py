@@ -427,14 +427,14 @@ def cmd_target(args, peer):
     # long; it ends as soon as all have come.
     name = f"kumi whole-body node: {r}"
     expected = {e for e in args.expect.split(",") if e}
-    heard = set(statuses) | {name} | expected
+    wanted = set(statuses) | {name} | expected
     statuses.clear()
-    peer.spin_until(lambda: heard <= set(statuses), 15.0)
+    peer.spin_until(lambda: wanted <= set(statuses), 15.0)
     diagnostics = statuses.get(name, {})
     end = trajectory[-1] if trajectory else None
     return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall,
             "trajectory": trajectory, "diagnostics": diagnostics, "all_diagnostics": statuses,
-            "missing_diagnostics": sorted(heard - set(statuses)),
+            "missing_diagnostics": sorted(wanted - set(statuses)),
             "position_error_m": math.dist(end[1:4], [x, y, z]) if end else None,
             "yaw_error_rad": abs((yaw - end[4] + math.pi) % (2 * math.pi) - math.pi) if end else None}
 
