@@ -271,7 +271,8 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         let start = Instant::now();
         let config = WholeBodyConfig {
             push,
-            replay: None, // training's: evaluation starts every episode afresh
+            replay: None,    // training's: evaluation starts every episode afresh
+            randomize: None, // training's: evaluation runs the robot's own physics
             ..file.environment(engine)?
         };
         let result = kumi_train::evaluate_body::evaluate_body(

@@ -13,6 +13,7 @@ use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig};
 use kumi_train::body_reward::{BodyWeights, PenaltyWeights};
 use kumi_train::env::Environment;
 use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
+use kumi_train::randomize::RandomizeConfig;
 use kumi_train::replay::ReplayConfig;
 use kumi_train::reward::ReachWeights;
 use kumi_train::whole_body::{ArmControl, PushConfig, TaskConfig, WholeBody, WholeBodyConfig};
@@ -228,6 +229,10 @@ pub struct TrainBodyConfig {
     /// is absent, and out of the hash then).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub replay: Option<ReplayConfig>,
+    /// Each training environment's own ground friction and contact (none when the section is
+    /// absent, and out of the hash then).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub randomize: Option<RandomizeConfig>,
 }
 
 impl TrainBodyConfig {
@@ -252,6 +257,7 @@ impl TrainBodyConfig {
             observation: self.observation,
             push: self.push,
             replay: self.replay,
+            randomize: self.randomize,
         })
     }
 

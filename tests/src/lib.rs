@@ -372,6 +372,7 @@ pub fn whole_body_config(
         observation: Default::default(),
         push: None,
         replay: None,
+        randomize: None,
     }
 }
 

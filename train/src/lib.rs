@@ -12,6 +12,7 @@ pub mod evaluate_body;
 pub mod export;
 pub mod nn;
 pub mod ppo;
+pub mod randomize;
 pub mod replay;
 pub mod reward;
 pub mod whole_body;

@@ -30,6 +30,7 @@ use crate::body_reward::{
     tilt_penalty, turn_penalty, BodyTerms, BodyWeights, PenaltyWeights,
 };
 use crate::evaluate_body::{leg_angles, ContactRule};
+use crate::randomize::RandomizeConfig;
 use crate::replay::{Replay, ReplayConfig};
 
 /// The task's settings per morphology (`[task]` in `train/configs/whole_body/*.toml`).
@@ -163,6 +164,8 @@ pub struct WholeBodyConfig {
     pub push: Option<PushConfig>,
     /// Episodes replayed from before earlier ones tipped (training; none: fresh starts only).
     pub replay: Option<ReplayConfig>,
+    /// Each environment's own physics, drawn from its seed (training; none: the robot's).
+    pub randomize: Option<RandomizeConfig>,
 }
 
 /// One arm module as its term drives it.
@@ -265,7 +268,11 @@ impl WholeBody {
             .arms
             .terms(&model)
             .map_err(|e| EnvError::Goals(e.to_string()))?;
-        let sim = SimConfig::for_model(&model);
+        let mut sim = SimConfig::for_model(&model);
+        if let Some(randomize) = &config.randomize {
+            randomize.check().map_err(EnvError::Goals)?;
+            sim = randomize.apply(sim, seed);
+        }
         let world = kumi_worlds::build(config.engine, model.clone(), sim)?;
         let mut arms = Vec::new();
         let arm_modules = terms.arms().map(|t| &t.module);

@@ -51,6 +51,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
         observation: Default::default(),
         push: None,
         replay: None,
+        randomize: None,
         arms: ArmControl::Skill(GoalBounds {
             manipulator_position_m: 0.25,
             manipulator_rotation_rad: 0.5,
@@ -122,6 +123,41 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
             "{module}: tool pose differs by {d} m, {r} rad"
         );
     }
+}
+
+#[test]
+fn each_environment_draws_its_own_physics_and_bad_ranges_are_refused() {
+    use kumi_train::randomize::RandomizeConfig;
+    let randomized = |ground_friction: [f64; 2]| WholeBodyConfig {
+        randomize: Some(RandomizeConfig {
+            ground_friction: Some(ground_friction),
+            mujoco_contact_time_s: Some([0.02, 0.04]),
+        }),
+        ..config(1.5)
+    };
+    let plain = WholeBody::new(model("tricycle"), config(1.5), &skill(), 5).unwrap();
+    assert_eq!(plain.world().config().ground_friction, 1.0);
+    assert_eq!(plain.world().config().mujoco_contact_time_s, None);
+    let frictions: Vec<f64> = [5, 6]
+        .into_iter()
+        .map(|seed| {
+            let env = WholeBody::new(model("tricycle"), randomized([0.5, 1.5]), &skill(), seed);
+            let sim = *env.unwrap().world().config();
+            assert!((0.02..=0.04).contains(&sim.mujoco_contact_time_s.unwrap()));
+            sim.ground_friction
+        })
+        .collect();
+    assert!(
+        frictions.iter().all(|f| (0.5..=1.5).contains(f)),
+        "{frictions:?}"
+    );
+    assert_ne!(frictions[0], frictions[1], "two seeds, two worlds");
+    let refused = WholeBody::new(model("tricycle"), randomized([1.5, 0.5]), &skill(), 5);
+    let message = refused
+        .err()
+        .expect("an empty range is refused")
+        .to_string();
+    assert!(message.contains("ground_friction"), "{message}");
 }
 
 #[test]

@@ -24,6 +24,9 @@ pub struct SimConfig {
     pub ground_friction: f64,
     /// Friction coefficient of robot colliders that the module files do not name.
     pub default_friction: f64,
+    /// MuJoCo's contact time constant [s] (the first value of every geom's `solref`); none:
+    /// twice MuJoCo's timestep. Only training's domain randomisation sets it; rapier has none.
+    pub mujoco_contact_time_s: Option<f64>,
 }
 
 impl Default for SimConfig {
@@ -37,6 +40,7 @@ impl Default for SimConfig {
             stabilization_iterations: 0,
             ground_friction: 1.0,
             default_friction: 0.8,
+            mujoco_contact_time_s: None,
         }
     }
 }
@@ -62,6 +66,12 @@ impl SimConfig {
     /// 60 s) at 1/120 s in MuJoCo, and stands (4 mm) at 1/240 s; its morphology file asks for 8.
     pub fn mujoco_dt(&self) -> f64 {
         1.0 / (self.control_hz * f64::from(self.mujoco_substeps))
+    }
+
+    /// MuJoCo's contact time constant [s]: [`SimConfig::mujoco_contact_time_s`], else twice
+    /// [`SimConfig::mujoco_dt`] (the smallest MuJoCo recommends).
+    pub fn mujoco_contact_time_s(&self) -> f64 {
+        self.mujoco_contact_time_s.unwrap_or(2.0 * self.mujoco_dt())
     }
 
     /// The label of this configuration in `engine`: [`SimConfig::label`] for rapier,

@@ -226,7 +226,7 @@ pub fn build(model: &RobotModel, config: &SimConfig) -> Result<Mjcf, SimError> {
 </mujoco>
 "#,
         name = model.name,
-        solref = 2.0 * dt,
+        solref = config.mujoco_contact_time_s(),
         gf = config.ground_friction,
         jacobian = jacobian(&tree, model.fixed_base),
     );
