@@ -58,8 +58,8 @@ impl RandomizeConfig {
     }
 }
 
-/// Uniform in `[lo, hi]` (`lo` itself for an empty range).
-fn draw([lo, hi]: [f64; 2], rng: &mut impl Rng) -> f64 {
+/// Uniform in `[lo, hi]`, both ends included (`lo` itself for an empty range).
+pub(crate) fn draw([lo, hi]: [f64; 2], rng: &mut impl Rng) -> f64 {
     if hi > lo {
         rng.random_range(lo..=hi)
     } else {

@@ -102,12 +102,7 @@ impl PushConfig {
 
     /// Control steps until the next push (at least 1), at `control_hz`.
     pub fn steps_to_next(&self, control_hz: f64, rng: &mut impl Rng) -> usize {
-        let [lo, hi] = self.interval_s;
-        let interval_s = if hi > lo {
-            rng.random_range(lo..=hi)
-        } else {
-            lo
-        };
+        let interval_s = crate::randomize::draw(self.interval_s, rng);
         ((interval_s * control_hz).round() as usize).max(1)
     }
 
