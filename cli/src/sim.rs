@@ -262,6 +262,11 @@ struct SimReport {
     max_joint_speed_rad_s: f64,
     finite: bool,
     ground_contacts_at_end: Vec<String>,
+    /// Wheel modules with no wheel on the ground, mean over the control steps (0 without
+    /// wheel modules).
+    wheel_modules_off_ground_mean: f64,
+    /// Share of the control steps on which every wheel module touched the ground.
+    all_wheel_modules_down_share: f64,
 }
 
 pub fn run(args: SimArgs) -> Result<()> {
@@ -311,6 +316,7 @@ pub fn run(args: SimArgs) -> Result<()> {
     let (mut max_tilt, mut lowest, mut mount_m, mut mount_rad, mut max_speed) =
         (0.0_f64, f64::INFINITY, 0.0_f64, 0.0_f64, 0.0_f64);
     let mut finite = true;
+    let (mut off_ground, mut all_down) = (0_usize, 0_u64);
     let wall = Instant::now();
     for _ in 0..steps {
         for driver in drivers.iter_mut() {
@@ -332,6 +338,9 @@ pub fn run(args: SimArgs) -> Result<()> {
                 .iter()
                 .all(|x| x.is_finite());
         max_speed = v.iter().fold(max_speed, |a, x| a.max(x.abs()));
+        let off = world.wheel_modules_off_ground();
+        off_ground += off;
+        all_down += u64::from(off == 0);
     }
     let wall_s = wall.elapsed().as_secs_f64();
     let end = world.base_pose().translation.vector;
@@ -356,6 +365,8 @@ pub fn run(args: SimArgs) -> Result<()> {
         max_joint_speed_rad_s: max_speed,
         finite,
         ground_contacts_at_end: world.ground_contacts(),
+        wheel_modules_off_ground_mean: off_ground as f64 / steps.max(1) as f64,
+        all_wheel_modules_down_share: all_down as f64 / steps.max(1) as f64,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -405,6 +416,11 @@ pub fn run(args: SimArgs) -> Result<()> {
         println!(
             "  touching the ground {}",
             report.ground_contacts_at_end.join(", ")
+        );
+        println!(
+            "  wheel modules off   {:.3} per control step; all down on {:.1} % of the steps",
+            report.wheel_modules_off_ground_mean,
+            100.0 * report.all_wheel_modules_down_share
         );
     }
     Ok(())

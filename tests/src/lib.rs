@@ -366,6 +366,7 @@ pub fn whole_body_config(
             tilt: 0.0,
             turn: 0.0,
             rock: 0.0,
+            airborne: 0.0,
         },
         penalty: Default::default(),
         arms: kumi_train::whole_body::ArmControl::Skill(bounds),

@@ -48,6 +48,12 @@ pub struct BodyWeights {
     /// `fall`.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub rock: f64,
+    /// Airborne penalty `-airborne * n` per step, n the wheel modules none of whose wheels
+    /// touches the ground (kumi's, training only; the paper has none). A tipping robot lifts a
+    /// wheel module first, so the term is felt long before the rare fall. Absent in a config:
+    /// 0, and left out of the serialised config like `fall`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub airborne: f64,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -88,6 +94,8 @@ pub struct BodyTerms {
     pub turn: f64,
     /// The rocking penalty.
     pub rock: f64,
+    /// The airborne penalty.
+    pub airborne: f64,
     /// Eq. 5 (penalty baseline only).
     pub leg_orientation: f64,
     /// Eq. 6 (penalty baseline only).
@@ -106,6 +114,7 @@ impl BodyTerms {
             + self.tilt
             + self.turn
             + self.rock
+            + self.airborne
             + self.leg_orientation
             + self.contact
     }
@@ -148,6 +157,11 @@ pub fn turn_penalty(w_turn: f64, speed_xy_m_s: f64, yaw_rate_rad_s: f64) -> f64 
 /// its own frame: its roll and pitch rates, not its yaw rate (driving turns the base about z).
 pub fn rock_penalty(w_rock: f64, angular_velocity_b: &nalgebra::Vector3<f64>) -> f64 {
     -w_rock * angular_velocity_b.xy().norm_squared()
+}
+
+/// `-w_airborne * modules_off_ground`: the wheel modules with no wheel on the ground.
+pub fn airborne_penalty(w_airborne: f64, modules_off_ground: usize) -> f64 {
+    -w_airborne * modules_off_ground as f64
 }
 
 /// Eq. 6: `-w_c` when an undesired arm contact occurs, else 0.
@@ -204,6 +218,7 @@ mod tests {
         tilt: 0.0,
         turn: 0.0,
         rock: 0.0,
+        airborne: 0.0,
     };
 
     #[test]
@@ -316,5 +331,24 @@ mod tests {
         assert!(serde_json::to_string(&with)
             .unwrap()
             .contains("\"rock\":2.0"));
+    }
+
+    #[test]
+    fn the_airborne_penalty_by_hand() {
+        // Two wheel modules off the ground at 0.3 each: -0.6; none off: nothing.
+        assert!((airborne_penalty(0.3, 2) + 0.6).abs() < 1e-12);
+        assert_eq!(airborne_penalty(0.3, 0), 0.0);
+        let t = BodyTerms {
+            alive: 0.5,
+            airborne: -0.6,
+            ..BodyTerms::default()
+        };
+        assert!((t.total() + 0.1).abs() < 1e-12);
+        // Unset, it stays out of the serialised weights: older configs keep their fingerprints.
+        assert!(!serde_json::to_string(&W).unwrap().contains("airborne"));
+        let with = BodyWeights { airborne: 0.3, ..W };
+        assert!(serde_json::to_string(&with)
+            .unwrap()
+            .contains("\"airborne\":0.3"));
     }
 }

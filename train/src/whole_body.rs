@@ -26,8 +26,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::arm_reach::EnvError;
 use crate::body_reward::{
-    body_terms, contact_penalty, fall_penalty, fallen, leg_orientation_reward, rock_penalty, tilt,
-    tilt_penalty, turn_penalty, BodyTerms, BodyWeights, PenaltyWeights,
+    airborne_penalty, body_terms, contact_penalty, fall_penalty, fallen, leg_orientation_reward,
+    rock_penalty, tilt, tilt_penalty, turn_penalty, BodyTerms, BodyWeights, PenaltyWeights,
 };
 use crate::evaluate_body::{leg_angles, ContactRule};
 use crate::randomize::RandomizeConfig;
@@ -615,6 +615,12 @@ impl WholeBody {
             let (_, w_w) = self.world.base_twist_w();
             let w_b = self.world.base_pose().rotation.inverse() * w_w;
             terms.rock = rock_penalty(self.config.weights.rock, &w_b);
+        }
+        if self.config.weights.airborne != 0.0 {
+            terms.airborne = airborne_penalty(
+                self.config.weights.airborne,
+                self.world.wheel_modules_off_ground(),
+            );
         }
         let terminated = self.world.diverged() || fell;
         if self.replay.is_some() && !self.world.diverged() {

@@ -46,6 +46,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
             tilt: 0.0,
             turn: 0.0,
             rock: 0.0,
+            airborne: 0.0,
         },
         penalty: PenaltyWeights::default(),
         observation: Default::default(),
@@ -451,6 +452,17 @@ fn assert_a_term_follows_the_world(
     term: impl Fn(&kumi_train::body_reward::BodyTerms) -> f64,
     expected: impl Fn(&WholeBody) -> f64,
 ) {
+    assert_a_term_follows_the_world_after(|_| {}, weigh, term, expected);
+}
+
+/// As [`assert_a_term_follows_the_world`], with `prepare` applied to both robots after their
+/// reset.
+fn assert_a_term_follows_the_world_after(
+    prepare: impl Fn(&mut WholeBody),
+    weigh: impl Fn(&mut BodyWeights),
+    term: impl Fn(&kumi_train::body_reward::BodyTerms) -> f64,
+    expected: impl Fn(&WholeBody) -> f64,
+) {
     let mut weighted = config(1.5);
     weigh(&mut weighted.weights);
     let action = [0.6_f32; 21];
@@ -458,6 +470,8 @@ fn assert_a_term_follows_the_world(
     let mut env = WholeBody::new(model("tricycle"), weighted, &skill(), 5).unwrap();
     plain.reset();
     env.reset();
+    prepare(&mut plain);
+    prepare(&mut env);
     let mut paid = 0.0;
     for _ in 0..30 {
         let unweighted = plain.step(&action);
@@ -499,6 +513,28 @@ fn the_rock_penalty_follows_the_bases_roll_and_pitch_rates() {
         |env| {
             let (_, w_w) = env.world().base_twist_w();
             rock_penalty(2.0, &(env.world().base_pose().rotation.inverse() * w_w))
+        },
+    );
+}
+
+#[test]
+fn the_airborne_penalty_counts_the_wheel_modules_off_the_ground() {
+    // Tricycle's wheel modules are wheel0..wheel2; one is down when any of its links is. Tossed
+    // up at 1.5 m/s, the robot leaves the ground for about 0.3 s and lands.
+    assert_a_term_follows_the_world_after(
+        |env| {
+            let up = Vector3::new(0.0, 0.0, 1.5);
+            env.world_mut().push(&up, &Vector3::zeros());
+        },
+        |w| w.airborne = 2.0,
+        |t| t.airborne,
+        |env| {
+            let down = env.world().ground_contacts();
+            let off = ["wheel0/", "wheel1/", "wheel2/"]
+                .iter()
+                .filter(|m| !down.iter().any(|l| l.starts_with(*m)))
+                .count();
+            -2.0 * off as f64
         },
     );
 }

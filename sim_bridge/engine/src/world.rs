@@ -254,4 +254,35 @@ pub trait SimWorld: Send {
             })
             .collect()
     }
+
+    /// The wheel modules (modules with velocity joints) none of whose links touches the ground
+    /// now. Ground links are named `module/link` ([`Self::ground_contacts`]).
+    fn wheel_modules_off_ground(&self) -> usize {
+        let down = self.ground_contacts();
+        self.model()
+            .modules
+            .iter()
+            .filter(|m| m.velocity_joints().next().is_some())
+            .filter(|m| !down.iter().any(|l| is_link_of(l, &m.name)))
+            .count()
+    }
+}
+
+/// Whether `link`, named `module/link`, belongs to `module`.
+fn is_link_of(link: &str, module: &str) -> bool {
+    link.strip_prefix(module)
+        .is_some_and(|rest| rest.starts_with('/'))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_link_of;
+
+    #[test]
+    fn a_link_belongs_to_the_module_its_name_starts_with() {
+        assert!(is_link_of("wheel1/wheel_left", "wheel1"));
+        assert!(!is_link_of("wheel10/wheel_left", "wheel1"));
+        assert!(!is_link_of("wheel1", "wheel1"));
+        assert!(!is_link_of("leg1/ee", "wheel1"));
+    }
 }
