@@ -136,6 +136,13 @@ fn prefixed(module: &str, name: &str) -> String {
     format!("{module}/{name}")
 }
 
+/// The inverse of the assembled robot's naming rule (`module/name`): `name` when
+/// `prefixed_name` is one of `module`'s joints or links, else `None` (`arm0/joint3` ->
+/// `joint3`; `wheel10/x` is not `wheel1`'s).
+pub fn unprefixed<'a>(module: &str, prefixed_name: &'a str) -> Option<&'a str> {
+    prefixed_name.strip_prefix(module)?.strip_prefix('/')
+}
+
 /// Assembles a validated morphology into one robot model.
 pub fn assemble(morphology: &Morphology, library: &ModuleLibrary) -> RobotModel {
     let mut links = Vec::new();
@@ -279,5 +286,21 @@ pub fn assemble(morphology: &Morphology, library: &ModuleLibrary) -> RobotModel 
         modules: instances,
         contacts,
         physics: morphology.physics,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{prefixed, unprefixed};
+
+    #[test]
+    fn a_name_belongs_to_the_module_it_was_prefixed_with() {
+        assert_eq!(
+            unprefixed("wheel1", &prefixed("wheel1", "wheel_left")),
+            Some("wheel_left")
+        );
+        assert_eq!(unprefixed("wheel1", "wheel10/wheel_left"), None);
+        assert_eq!(unprefixed("wheel1", "wheel1"), None);
+        assert_eq!(unprefixed("wheel1", "leg1/ee"), None);
     }
 }

@@ -16,7 +16,7 @@ mod morphology;
 mod physics;
 pub mod pose;
 
-pub use assemble::{assemble, ModuleInstance, RobotModel};
+pub use assemble::{assemble, unprefixed, ModuleInstance, RobotModel};
 pub use catalog::{load_morphology, shipped_morphologies, ModuleLibrary, SHIPPED_MORPHOLOGIES};
 pub use error::{ModelError, Problem};
 pub use module::{Actuator, ActuatorMode, Connector, ContactMaterial, Module};

@@ -267,12 +267,9 @@ pub fn base_state(msg: &Odometry) -> Option<BaseState> {
     })
 }
 
-/// A joint's name without its module's prefix (`arm0/joint3` -> `joint3`).
+/// A joint's name without its module's prefix (`arm0/joint3` -> `joint3`), or as it is.
 fn unprefixed<'a>(module: &str, joint: &'a str) -> &'a str {
-    joint
-        .strip_prefix(module)
-        .and_then(|j| j.strip_prefix('/'))
-        .unwrap_or(joint)
+    kumi_model::unprefixed(module, joint).unwrap_or(joint)
 }
 
 /// Publishes a decision: wheel velocities first, then the goals stamped with the tick.

@@ -263,26 +263,11 @@ pub trait SimWorld: Send {
             .modules
             .iter()
             .filter(|m| m.velocity_joints().next().is_some())
-            .filter(|m| !down.iter().any(|l| is_link_of(l, &m.name)))
+            .filter(|m| {
+                !down
+                    .iter()
+                    .any(|l| kumi_model::unprefixed(&m.name, l).is_some())
+            })
             .count()
-    }
-}
-
-/// Whether `link`, named `module/link`, belongs to `module`.
-fn is_link_of(link: &str, module: &str) -> bool {
-    link.strip_prefix(module)
-        .is_some_and(|rest| rest.starts_with('/'))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::is_link_of;
-
-    #[test]
-    fn a_link_belongs_to_the_module_its_name_starts_with() {
-        assert!(is_link_of("wheel1/wheel_left", "wheel1"));
-        assert!(!is_link_of("wheel10/wheel_left", "wheel1"));
-        assert!(!is_link_of("wheel1", "wheel1"));
-        assert!(!is_link_of("leg1/ee", "wheel1"));
     }
 }
