@@ -273,6 +273,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
             push,
             replay: None,    // training's: evaluation starts every episode afresh
             randomize: None, // training's: evaluation runs the robot's own physics
+            critic: Default::default(), // training's: what only the critic sees
             ..file.environment(engine)?
         };
         let result = kumi_train::evaluate_body::evaluate_body(

@@ -16,7 +16,9 @@ use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
 use kumi_train::randomize::RandomizeConfig;
 use kumi_train::replay::ReplayConfig;
 use kumi_train::reward::ReachWeights;
-use kumi_train::whole_body::{ArmControl, PushConfig, TaskConfig, WholeBody, WholeBodyConfig};
+use kumi_train::whole_body::{
+    ArmControl, CriticObservation, PushConfig, TaskConfig, WholeBody, WholeBodyConfig,
+};
 
 /// The training config file: PPO hyperparameters, the reward's weights and the goals.
 #[derive(Debug, serde::Deserialize, serde::Serialize)]
@@ -233,6 +235,10 @@ pub struct TrainBodyConfig {
     /// absent, and out of the hash then).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub randomize: Option<RandomizeConfig>,
+    /// What only the critic sees in training (none when the section is absent, and out of the
+    /// hash then).
+    #[serde(default, skip_serializing_if = "CriticObservation::is_none")]
+    pub critic: CriticObservation,
 }
 
 impl TrainBodyConfig {
@@ -258,6 +264,7 @@ impl TrainBodyConfig {
             push: self.push,
             replay: self.replay,
             randomize: self.randomize,
+            critic: self.critic,
         })
     }
 
@@ -562,7 +569,7 @@ fn train<E: Environment>(
         trainer.env_steps.to_string(),
     );
     let onnx = kumi_train::export::actor_model(
-        &trainer.norm,
+        &trainer.actor_norm(),
         &trainer.learner.net.actor.parameters(),
         &metadata,
     );
@@ -687,6 +694,14 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
             "no skill: arm joints commanded directly".into()
         }
     );
+    if envs[0].critic_extras_dim() > 0 {
+        eprintln!(
+            "the critic also sees {} values ([critic]: {}); the policy file takes the {} observations",
+            envs[0].critic_extras_dim(),
+            serde_json::to_string(&file.critic)?,
+            envs[0].observation_dim(),
+        );
+    }
     let name = args.variant.policy_name(&model.name);
     let out = args
         .out
@@ -901,14 +916,14 @@ mod tests {
 
     #[test]
     fn the_training_only_sections_are_optional_out_of_the_hash_when_absent_and_off_in_eval() {
-        // [push], [replay] and [ppo]'s critic_learning_rate change training, not the policy:
+        // [push], [replay], [critic] and [ppo]'s critic_learning_rate change training, not the policy:
         // absent, none is serialised, so every shipped policy keeps its config hash.
         for (_, _, text) in SHIPPED_BODY_CONFIGS.iter().chain(&SHIPPED_LAST_STAGES) {
             let plain: TrainBodyConfig = toml::from_str(text).unwrap();
             assert!(plain.push.is_none() && plain.replay.is_none());
-            assert!(plain.ppo.critic_learning_rate.is_none());
+            assert!(plain.ppo.critic_learning_rate.is_none() && plain.critic.is_none());
             let json = serde_json::to_string(&plain).unwrap();
-            for key in ["push", "replay", "critic_learning_rate"] {
+            for key in ["push", "replay", "critic_learning_rate", "\"critic\""] {
                 assert!(!json.contains(key), "{key} in {json}");
             }
         }
@@ -919,6 +934,14 @@ mod tests {
         );
         let config: TrainBodyConfig = toml::from_str(&with).unwrap();
         assert_eq!(config.ppo.critic_learning_rate, Some(3e-4));
+        assert!(config.critic.is_none());
+        let privileged = format!("{with}\n[critic]\nbase_height = true\narm_joint_state = true\n");
+        let privileged: TrainBodyConfig = toml::from_str(&privileged).unwrap();
+        let critic = privileged
+            .environment(kumi_worlds::Engine::Rapier)
+            .unwrap()
+            .critic;
+        assert!(critic.base_height && critic.arm_joint_state && !critic.base_angular_velocity);
         let env = config.environment(kumi_worlds::Engine::Rapier).unwrap();
         assert_eq!(env.push.unwrap().tip_rad_s, 1.0);
         assert_eq!(env.replay.unwrap().capacity, 16);

@@ -228,6 +228,59 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
 }
 
 #[test]
+fn a_critic_that_sees_more_trains_and_exports_a_policy_of_the_policys_observation() {
+    // [critic]: the value function reads the robot's state beyond Table III in training; the
+    // exported policy takes the 19 values of Minimal's observation, as the node and eval
+    // build them, and evaluates against the same config.
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let text = std::fs::read_to_string(root.join("train/configs/whole_body/minimal.toml")).unwrap();
+    let out_dir = std::env::temp_dir().join(format!("kumi-train-critic-{}", std::process::id()));
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let config = out_dir.join("critic.toml");
+    std::fs::write(
+        &config,
+        format!("{text}\n[critic]\nbase_angular_velocity = true\nbase_height = true\narm_joint_state = true\nwheel_modules_off_ground = true\n"),
+    )
+    .unwrap();
+    let out = kumi(&[
+        "train",
+        "whole-body",
+        "minimal",
+        "--config",
+        config.to_str().unwrap(),
+        "--steps",
+        "4096",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    let progress = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{progress}");
+    // 3 + 1 + 2 x 7 + 1 values more for the critic.
+    assert!(
+        progress.contains("19 observations, 7 actions")
+            && progress.contains("the critic also sees 19 values"),
+        "{progress}"
+    );
+    let policy = out_dir.join("minimal_whole_body.onnx");
+    let v: serde_json::Value = kumi_json(&[
+        "eval",
+        "whole-body",
+        "minimal",
+        "--policy",
+        policy.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--rollouts",
+        "2",
+        "--backend",
+        "tract",
+        "--json",
+    ]);
+    assert_eq!(v["rollouts"], 2);
+    std::fs::remove_dir_all(&out_dir).unwrap();
+}
+
+#[test]
 fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
     let out_dir = std::env::temp_dir().join(format!("kumi-train-wb-{}", std::process::id()));
     let out = kumi(&[

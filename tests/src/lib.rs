@@ -374,6 +374,7 @@ pub fn whole_body_config(
         push: None,
         replay: None,
         randomize: None,
+        critic: Default::default(),
     }
 }
 

@@ -17,7 +17,13 @@ pub struct Transition {
 
 /// An episodic environment with continuous actions.
 pub trait Environment: Send {
+    /// Values per observation: what the critic reads.
     fn observation_dim(&self) -> usize;
+    /// How many leading observation values the actor reads (all by default; fewer when the
+    /// environment appends values only the critic sees).
+    fn actor_observation_dim(&self) -> usize {
+        self.observation_dim()
+    }
     fn action_dim(&self) -> usize;
     /// Starts an episode and returns its first observation.
     fn reset(&mut self) -> Vec<f32>;
@@ -85,8 +91,14 @@ impl Environment for crate::arm_reach::ArmReach {
     }
 }
 
+/// The whole-body environment in training: the policy's observation, then what only the
+/// critic sees (`[critic]`; nothing without it).
 impl Environment for crate::whole_body::WholeBody {
     fn observation_dim(&self) -> usize {
+        crate::whole_body::WholeBody::observation_dim(self) + self.critic_extras_dim()
+    }
+
+    fn actor_observation_dim(&self) -> usize {
         crate::whole_body::WholeBody::observation_dim(self)
     }
 
@@ -95,7 +107,9 @@ impl Environment for crate::whole_body::WholeBody {
     }
 
     fn reset(&mut self) -> Vec<f32> {
-        crate::whole_body::WholeBody::reset(self)
+        let mut observation = crate::whole_body::WholeBody::reset(self);
+        observation.extend(self.critic_extras());
+        observation
     }
 
     fn step(&mut self, action: &[f32]) -> Transition {
@@ -111,8 +125,10 @@ impl Environment for crate::whole_body::WholeBody {
             metrics.push((BODY_METRICS[0], o.position_error));
             metrics.push((BODY_METRICS[1], o.yaw_error));
         }
+        let mut observation = o.observation;
+        observation.extend(self.critic_extras());
         Transition {
-            observation: o.observation,
+            observation,
             reward: o.reward,
             terminated: o.terminated,
             truncated: o.truncated,

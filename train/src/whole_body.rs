@@ -161,6 +161,47 @@ pub struct WholeBodyConfig {
     pub replay: Option<ReplayConfig>,
     /// Each environment's own physics, drawn from its seed (training; none: the robot's).
     pub randomize: Option<RandomizeConfig>,
+    /// What only the critic sees (training; none: the critic reads the policy's observation).
+    pub critic: CriticObservation,
+}
+
+/// What only the critic sees (`[critic]` in a whole-body config; training only): an asymmetric
+/// actor-critic, whose value function reads more of the robot's state than the policy does.
+/// The training environment appends these values to the policy's observation, in this order;
+/// the actor reads the observation's leading values, and an exported policy carries only
+/// those, so nothing here reaches a policy file or the whole-body node.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CriticObservation {
+    /// The base's angular velocity [rad/s] in the base frame (3 values).
+    #[serde(default)]
+    pub base_angular_velocity: bool,
+    /// The base origin's height [m] in the world frame (1 value).
+    #[serde(default)]
+    pub base_height: bool,
+    /// Every arm module's joint angles [rad], then their velocities [rad/s] (module by module
+    /// in the action terms' order, each in actuator order).
+    #[serde(default)]
+    pub arm_joint_state: bool,
+    /// How many wheel modules have no wheel on the ground
+    /// (`SimWorld::wheel_modules_off_ground`, the `airborne` term's rule; 1 value).
+    #[serde(default)]
+    pub wheel_modules_off_ground: bool,
+}
+
+impl CriticObservation {
+    /// True when the critic sees only the policy's observation.
+    pub fn is_none(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// How many values these add, for a robot with `arm_joints` arm joints in all.
+    pub fn size(&self, arm_joints: usize) -> usize {
+        3 * usize::from(self.base_angular_velocity)
+            + usize::from(self.base_height)
+            + 2 * arm_joints * usize::from(self.arm_joint_state)
+            + usize::from(self.wheel_modules_off_ground)
+    }
 }
 
 /// One arm module as its term drives it.
@@ -339,6 +380,34 @@ impl WholeBody {
         let wheels = self.wheel_joints.len();
         let slots = body_obs::slots(wheels, arm_joints, self.terms.size(), options);
         body_obs::size(&body_obs::with_arm_state(slots, self.flat_joints()))
+    }
+
+    /// How many values only the critic sees ([`CriticObservation`]).
+    pub fn critic_extras_dim(&self) -> usize {
+        let arm_joints = self.arms.iter().map(|a| a.joints.len()).sum();
+        self.config.critic.size(arm_joints)
+    }
+
+    /// The values only the critic sees now, in [`CriticObservation`]'s order.
+    pub fn critic_extras(&self) -> Vec<f32> {
+        let c = self.config.critic;
+        let mut extras = Vec::with_capacity(self.critic_extras_dim());
+        let base = self.world.base_pose();
+        if c.base_angular_velocity {
+            let angular_b = base.rotation.inverse() * self.world.base_twist_w().1;
+            extras.extend(angular_b.iter().map(|v| *v as f32));
+        }
+        if c.base_height {
+            extras.push(base.translation.z as f32);
+        }
+        if c.arm_joint_state {
+            let (q, qd) = (self.world.joint_positions(), self.world.joint_velocities());
+            body_obs::push_arm_state(&mut extras, &self.arm_values(&q), &self.arm_values(&qd));
+        }
+        if c.wheel_modules_off_ground {
+            extras.push(self.world.wheel_modules_off_ground() as f32);
+        }
+        extras
     }
 
     /// Arm joints whose state the flat baseline observes (0 over the skill).

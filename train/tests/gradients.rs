@@ -46,8 +46,14 @@ impl Data {
 /// A network with non-trivial parameters and a batch whose probability ratios spread over and
 /// beyond the clipping range (so that both branches of the clipped objective are exercised).
 fn fixture() -> (ActorCritic<f64>, Data) {
+    fixture_reading(OBS)
+}
+
+/// [`fixture`] with an actor that reads the leading `actor_obs` of the `OBS` values the critic
+/// reads.
+fn fixture_reading(actor_obs: usize) -> (ActorCritic<f64>, Data) {
     let mut rng = ChaCha8Rng::seed_from_u64(3);
-    let mut net = ActorCritic::<f64>::new(OBS, ACT, &HIDDEN, -0.3, &mut rng);
+    let mut net = ActorCritic::<f64>::asymmetric(OBS, actor_obs, ACT, &HIDDEN, -0.3, &mut rng);
     // A last actor layer of ordinary size, so that means and their gradients are not tiny.
     net.actor
         .params
@@ -93,6 +99,32 @@ fn parameters_mut(net: &mut ActorCritic<f64>) -> Vec<&mut f64> {
 #[test]
 fn gradients_match_finite_differences_to_1e_5() {
     let (net, data) = fixture();
+    assert_matches_finite_differences(&net, &data);
+}
+
+#[test]
+fn an_asymmetric_critics_gradients_match_finite_differences_and_the_actor_reads_its_part() {
+    let (net, data) = fixture_reading(3);
+    assert_eq!((net.actor.inputs(), net.critic.inputs()), (3, OBS));
+    assert_matches_finite_differences(&net, &data);
+    // What only the critic sees (the last two values of each row) moves the values, never the
+    // means.
+    let mut moved = data.observations.clone();
+    moved
+        .chunks_mut(OBS)
+        .for_each(|row| row[3..].iter_mut().for_each(|v| *v += 0.7));
+    assert_eq!(net.mean(&moved), net.mean(&data.observations));
+    let (before, after) = (net.value(&data.observations), net.value(&moved));
+    assert!(before.iter().zip(&after).all(|(b, a)| b != a));
+    // An actor that reads every value is the symmetric network, draw for draw.
+    let rng = |seed| ChaCha8Rng::seed_from_u64(seed);
+    assert_eq!(
+        ActorCritic::<f64>::asymmetric(OBS, OBS, ACT, &HIDDEN, -0.3, &mut rng(9)),
+        ActorCritic::<f64>::new(OBS, ACT, &HIDDEN, -0.3, &mut rng(9))
+    );
+}
+
+fn assert_matches_finite_differences(net: &ActorCritic<f64>, data: &Data) {
     // Some means lie past the clip range, so the bound loss is part of what is checked.
     let means = net.mean(&data.observations);
     let past = means.iter().filter(|m| m.abs() > 1.0).count();

@@ -53,6 +53,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
         push: None,
         replay: None,
         randomize: None,
+        critic: Default::default(),
         arms: ArmControl::Skill(GoalBounds {
             manipulator_position_m: 0.25,
             manipulator_rotation_rad: 0.5,
@@ -304,6 +305,67 @@ fn the_arm_joint_angle_slot_holds_each_arm_modules_angles_in_the_terms_order() {
             .collect();
         assert_eq!(b[a.len()..], expected[..]);
     }
+}
+
+#[test]
+fn what_only_the_critic_sees_follows_the_policys_observation_and_the_world() {
+    use kumi_train::env::Environment;
+    use kumi_train::whole_body::CriticObservation;
+    let privileged = WholeBodyConfig {
+        critic: CriticObservation {
+            base_angular_velocity: true,
+            base_height: true,
+            arm_joint_state: true,
+            wheel_modules_off_ground: true,
+        },
+        ..config(1.5)
+    };
+    let mut plain = WholeBody::new(model("tricycle"), config(1.5), &skill(), 3).unwrap();
+    let mut with = WholeBody::new(model("tricycle"), privileged, &skill(), 3).unwrap();
+    // The policy's observation is unchanged: the contract, evaluation and the node never see
+    // the extras. Training's view appends them: 3 + 1 + 2 x 28 + 1.
+    let policy_dim = plain.observation_dim();
+    assert_eq!(with.observation_dim(), policy_dim);
+    assert_eq!(Environment::actor_observation_dim(&with), policy_dim);
+    assert_eq!(Environment::observation_dim(&with), policy_dim + 61);
+    assert_eq!(Environment::observation_dim(&plain), policy_dim);
+    let (a, b) = (
+        Environment::reset(&mut plain),
+        Environment::reset(&mut with),
+    );
+    assert_eq!(b.len(), policy_dim + 61);
+    assert_eq!(b[..policy_dim], a[..], "the same seed: the same episode");
+    let arms: Vec<String> = with.terms().arms().map(|a| a.module.clone()).collect();
+    let turn = vec![0.7; with.terms().size()];
+    let mut heights = Vec::new();
+    for _ in 0..10 {
+        let a = Environment::step(&mut plain, &turn).observation;
+        let b = Environment::step(&mut with, &turn).observation;
+        assert_eq!(b[..policy_dim], a[..]);
+        assert_eq!(b[..policy_dim], with.observation()[..]);
+        // An independent reading of the world, in CriticObservation's order.
+        let world = with.world();
+        let pose = world.base_pose();
+        let w_b = pose.rotation.inverse() * world.base_twist_w().1;
+        let mut expected: Vec<f32> = w_b.iter().map(|v| *v as f32).collect();
+        expected.push(pose.translation.z as f32);
+        for values in [world.joint_positions(), world.joint_velocities()] {
+            for m in &arms {
+                expected.extend(
+                    values[world.module_range(m).unwrap()]
+                        .iter()
+                        .map(|v| *v as f32),
+                );
+            }
+        }
+        expected.push(world.wheel_modules_off_ground() as f32);
+        assert_eq!(b[policy_dim..], expected[..]);
+        heights.push(pose.translation.z);
+    }
+    assert!(
+        heights.iter().all(|z| (0.5..2.0).contains(z)),
+        "{heights:?}"
+    );
 }
 
 #[test]

@@ -2,6 +2,11 @@
 //! seeded generator, a state-independent learned log standard deviation, and the PPO loss's
 //! gradient over a minibatch, computed in parallel blocks of rows.
 //!
+//! **An asymmetric critic.** The actor may read only the leading values of each observation
+//! row, the critic all of them ([`ActorCritic::asymmetric`]): the trailing values are what
+//! only the critic sees in training (`[critic]` in a whole-body config), and an exported policy
+//! never needs them.
+//!
 //! **Determinism.** A minibatch is cut into blocks of [`BLOCK_ROWS`] rows whatever the number
 //! of threads; blocks run in parallel and their gradients are summed in block order, so a
 //! seeded run gives the same bits on 1 thread or 16.
@@ -21,7 +26,8 @@ pub const BLOCK_ROWS: usize = 256;
 /// Names of the parameter groups (checkpoints), in the order of [`ActorCritic::groups`].
 pub const GROUP_NAMES: [&str; 3] = ["actor", "critic", "log_std"];
 
-/// A Gaussian policy (mean from the actor MLP, learned log-std) and a value function.
+/// A Gaussian policy (mean from the actor MLP, learned log-std) and a value function. The
+/// critic reads whole observation rows, the actor their leading `actor.inputs()` values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ActorCritic<T = f32> {
     pub actor: Mlp<T>,
@@ -70,7 +76,16 @@ pub struct Minibatch<'a, T> {
     pub samples: Samples<'a, T>,
 }
 
+/// The leading `keep` values of every `width`-long row of `x`.
+pub fn leading_columns<T: Copy>(x: &[T], width: usize, keep: usize) -> Vec<T> {
+    x.chunks(width)
+        .flat_map(|row| &row[..keep])
+        .copied()
+        .collect()
+}
+
 impl<T: Real> ActorCritic<T> {
+    /// Actor and critic both reading `obs_dim` values.
     pub fn new(
         obs_dim: usize,
         action_dim: usize,
@@ -78,11 +93,39 @@ impl<T: Real> ActorCritic<T> {
         initial_log_std: f32,
         rng: &mut ChaCha8Rng,
     ) -> Self {
-        let sizes = |out: usize| [&[obs_dim][..], hidden, &[out]].concat();
+        Self::asymmetric(obs_dim, obs_dim, action_dim, hidden, initial_log_std, rng)
+    }
+
+    /// The critic reading `obs_dim` values, the actor the leading `actor_dim` of them
+    /// (`actor_dim <= obs_dim`; equal, this is [`ActorCritic::new`], draw for draw).
+    pub fn asymmetric(
+        obs_dim: usize,
+        actor_dim: usize,
+        action_dim: usize,
+        hidden: &[usize],
+        initial_log_std: f32,
+        rng: &mut ChaCha8Rng,
+    ) -> Self {
+        assert!(
+            actor_dim <= obs_dim,
+            "the actor reads a part of the observation"
+        );
+        let sizes = |inputs: usize, out: usize| [&[inputs][..], hidden, &[out]].concat();
         Self {
-            actor: Mlp::new(&sizes(action_dim), 0.01, rng),
-            critic: Mlp::new(&sizes(1), 1.0, rng),
+            actor: Mlp::new(&sizes(actor_dim, action_dim), 0.01, rng),
+            critic: Mlp::new(&sizes(obs_dim, 1), 1.0, rng),
             log_std: vec![T::of(f64::from(initial_log_std)); action_dim],
+        }
+    }
+
+    /// The values of observation rows [rows, D] the actor reads (all of them, borrowed, when it
+    /// reads everything the critic does).
+    fn actor_view<'a>(&self, observations: &'a [T]) -> std::borrow::Cow<'a, [T]> {
+        let (d, k) = (self.critic.inputs(), self.actor.inputs());
+        if k == d {
+            std::borrow::Cow::Borrowed(observations)
+        } else {
+            std::borrow::Cow::Owned(leading_columns(observations, d, k))
         }
     }
 
@@ -109,9 +152,10 @@ impl<T: Real> ActorCritic<T> {
         ]
     }
 
-    /// The policy means [rows, A] of normalised observations [rows, D].
+    /// The policy means [rows, A] of normalised observations [rows, D] (the actor reads the
+    /// leading values of each row).
     pub fn mean(&self, observations: &[T]) -> Vec<T> {
-        forward_rows(&self.actor, observations)
+        forward_rows(&self.actor, &self.actor_view(observations))
     }
 
     /// Value estimates [rows] of normalised observations [rows, D].
@@ -125,7 +169,7 @@ impl<T: Real> ActorCritic<T> {
         batch: &Minibatch<T>,
         c: &LossCoefficients,
     ) -> (Loss, Gradient<T>) {
-        let (d, a) = (self.actor.inputs(), self.log_std.len());
+        let (d, a) = (self.critic.inputs(), self.log_std.len());
         let rows = batch.samples.old_log_prob.len();
         assert_eq!(
             batch.observations.len(),
@@ -140,7 +184,7 @@ impl<T: Real> ActorCritic<T> {
                 let r = end - start;
                 let s = &batch.samples;
                 let obs = &batch.observations[start * d..end * d];
-                let actor = self.actor.forward_trace(obs, r);
+                let actor = self.actor.forward_trace(&self.actor_view(obs), r);
                 let critic = self.critic.forward_trace(obs, r);
                 let samples = Samples {
                     actions: &s.actions[start * a..end * a],

@@ -365,9 +365,27 @@ impl Learner {
         act_dim: usize,
         rng: &mut ChaCha8Rng,
     ) -> std::result::Result<Self, ConfigError> {
+        Self::asymmetric(config, obs_dim, obs_dim, act_dim, rng)
+    }
+
+    /// As [`Learner::new`], the actor reading the leading `actor_dim` of the `obs_dim`
+    /// observation values the critic reads ([`ActorCritic::asymmetric`]).
+    pub fn asymmetric(
+        config: PpoConfig,
+        obs_dim: usize,
+        actor_dim: usize,
+        act_dim: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> std::result::Result<Self, ConfigError> {
         config.check().map_err(ConfigError)?;
-        let net = ActorCritic::new(
+        if actor_dim == 0 || actor_dim > obs_dim {
+            return Err(ConfigError(format!(
+                "the actor reads {actor_dim} of {obs_dim} observation values"
+            )));
+        }
+        let net = ActorCritic::asymmetric(
             obs_dim,
+            actor_dim,
             act_dim,
             &config.hidden,
             config.initial_log_std,
@@ -395,7 +413,7 @@ impl Learner {
 
     /// Epochs of shuffled minibatch steps; returns the mean loss parts.
     pub fn update(&mut self, data: &Batch, env_steps: u64) -> Loss {
-        let (d, a) = (self.net.actor.inputs(), self.net.log_std.len());
+        let (d, a) = (self.net.critic.inputs(), self.net.log_std.len());
         let total = data.returns.len();
         let anneal = self.config.anneal(env_steps);
         let coefficients = LossCoefficients {
@@ -472,7 +490,8 @@ impl<E: Environment> Trainer<E> {
         }
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
         let (obs_dim, act_dim) = (envs[0].observation_dim(), envs[0].action_dim());
-        let learner = Learner::new(config, obs_dim, act_dim, &mut rng)?;
+        let actor_dim = envs[0].actor_observation_dim();
+        let learner = Learner::asymmetric(config, obs_dim, actor_dim, act_dim, &mut rng)?;
         let observations = envs.iter_mut().map(|e| e.reset()).collect();
         Ok(Self {
             norm: RunningNorm::new(obs_dim),
@@ -641,9 +660,21 @@ impl<E: Environment> Trainer<E> {
         rollout.rewards.len() as f64 / rollout.seconds
     }
 
-    /// The deterministic action (the mean) for a raw observation.
+    /// The deterministic action (the mean) for a raw observation (the environment's whole
+    /// observation, what only the critic sees included).
     pub fn act(&self, observation: &[f32]) -> Vec<f32> {
         self.learner.net.mean(&self.norm.apply(observation))
+    }
+
+    /// The observation normaliser of what the actor reads (the leading values): what an
+    /// exported policy carries.
+    pub fn actor_norm(&self) -> RunningNorm {
+        let k = self.learner.net.actor.inputs();
+        RunningNorm {
+            mean: self.norm.mean[..k].to_vec(),
+            var: self.norm.var[..k].to_vec(),
+            count: self.norm.count,
+        }
     }
 
     /// Saves the parameters and Adam's moments (`params.safetensors`), the observation
