@@ -942,6 +942,15 @@ mod tests {
             .unwrap()
             .critic;
         assert!(critic.base_height && critic.arm_joint_state && !critic.base_angular_velocity);
+        // Set, it is part of the config (and its hash); misspelt, it is refused by name.
+        assert!(serde_json::to_string(&privileged)
+            .unwrap()
+            .contains("\"critic\":{\"base_angular_velocity\":false,\"base_height\":true"));
+        let typo = format!("{with}\n[critic]\nbase_heigth = true\n");
+        let err = toml::from_str::<TrainBodyConfig>(&typo)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("base_heigth"), "{err}");
         let env = config.environment(kumi_worlds::Engine::Rapier).unwrap();
         assert_eq!(env.push.unwrap().tip_rad_s, 1.0);
         assert_eq!(env.replay.unwrap().capacity, 16);

@@ -84,6 +84,11 @@ pub fn actor_model(
     metadata: &std::collections::BTreeMap<String, String>,
 ) -> ModelProto {
     let obs_dim = norm.mean.len();
+    assert_eq!(
+        layers.first().map(|l| l.inputs),
+        Some(obs_dim),
+        "the normaliser's width is the actor's input (Trainer::actor_norm)"
+    );
     let mut initializer = vec![
         tensor(
             "obs_mean",

@@ -180,7 +180,8 @@ pub struct CriticObservation {
     #[serde(default)]
     pub base_height: bool,
     /// Every arm module's joint angles [rad], then their velocities [rad/s] (module by module
-    /// in the action terms' order, each in actuator order).
+    /// in the action terms' order, each in actuator order; the flat baseline observes these
+    /// already).
     #[serde(default)]
     pub arm_joint_state: bool,
     /// How many wheel modules have no wheel on the ground
@@ -391,6 +392,9 @@ impl WholeBody {
     /// The values only the critic sees now, in [`CriticObservation`]'s order.
     pub fn critic_extras(&self) -> Vec<f32> {
         let c = self.config.critic;
+        if c.is_none() {
+            return Vec::new();
+        }
         let mut extras = Vec::with_capacity(self.critic_extras_dim());
         let base = self.world.base_pose();
         if c.base_angular_velocity {

@@ -116,12 +116,6 @@ fn an_asymmetric_critics_gradients_match_finite_differences_and_the_actor_reads_
     assert_eq!(net.mean(&moved), net.mean(&data.observations));
     let (before, after) = (net.value(&data.observations), net.value(&moved));
     assert!(before.iter().zip(&after).all(|(b, a)| b != a));
-    // An actor that reads every value is the symmetric network, draw for draw.
-    let rng = |seed| ChaCha8Rng::seed_from_u64(seed);
-    assert_eq!(
-        ActorCritic::<f64>::asymmetric(OBS, OBS, ACT, &HIDDEN, -0.3, &mut rng(9)),
-        ActorCritic::<f64>::new(OBS, ACT, &HIDDEN, -0.3, &mut rng(9))
-    );
 }
 
 fn assert_matches_finite_differences(net: &ActorCritic<f64>, data: &Data) {

@@ -78,6 +78,11 @@ pub struct Minibatch<'a, T> {
 
 /// The leading `keep` values of every `width`-long row of `x`.
 pub fn leading_columns<T: Copy>(x: &[T], width: usize, keep: usize) -> Vec<T> {
+    assert!(
+        keep <= width && x.len().is_multiple_of(width),
+        "rows of {width} values, {} in all, {keep} kept",
+        x.len()
+    );
     x.chunks(width)
         .flat_map(|row| &row[..keep])
         .copied()
@@ -107,8 +112,8 @@ impl<T: Real> ActorCritic<T> {
         rng: &mut ChaCha8Rng,
     ) -> Self {
         assert!(
-            actor_dim <= obs_dim,
-            "the actor reads a part of the observation"
+            0 < actor_dim && actor_dim <= obs_dim,
+            "the actor reads {actor_dim} of {obs_dim} observation values"
         );
         let sizes = |inputs: usize, out: usize| [&[inputs][..], hidden, &[out]].concat();
         Self {

@@ -742,9 +742,15 @@ impl<E: Environment> Trainer<E> {
                 return Err(format(
                     &params,
                     format!(
-                        "`{name}` has {} values, the network {}",
+                        "`{name}` has {} values, the network {}{}",
                         found.len(),
-                        into.len()
+                        into.len(),
+                        if name.contains("critic") {
+                            " (a critic that sees other values: resume with the [critic] \
+                             section the checkpoint was trained with)"
+                        } else {
+                            ""
+                        }
                     ),
                 ));
             }
