@@ -21,6 +21,23 @@ fn kumi_ok(args: &[&str]) -> Output {
     out
 }
 
+/// `kumi train whole-body minimal` for 4096 steps into `out_dir`, with `extra` arguments; it
+/// must succeed. Returns its progress output (stderr).
+fn train_minimal_briefly(out_dir: &std::path::Path, extra: &[&str]) -> String {
+    let out_dir = out_dir.to_str().unwrap();
+    let mut args = vec![
+        "train",
+        "whole-body",
+        "minimal",
+        "--steps",
+        "4096",
+        "--out",
+        out_dir,
+    ];
+    args.extend_from_slice(extra);
+    String::from_utf8_lossy(&kumi_ok(&args).stderr).into_owned()
+}
+
 /// Runs `kumi`, which must succeed, and parses its stdout as JSON.
 fn kumi_json<T: serde::de::DeserializeOwned>(args: &[&str]) -> T {
     serde_json::from_slice(&kumi_ok(args).stdout).unwrap()
@@ -242,19 +259,7 @@ fn a_critic_that_sees_more_trains_and_exports_a_policy_of_the_policys_observatio
         format!("{text}\n[critic]\nbase_height = true\nwheel_modules_off_ground = true\n"),
     )
     .unwrap();
-    let out = kumi(&[
-        "train",
-        "whole-body",
-        "minimal",
-        "--config",
-        config.to_str().unwrap(),
-        "--steps",
-        "4096",
-        "--out",
-        out_dir.to_str().unwrap(),
-    ]);
-    let progress = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{progress}");
+    let progress = train_minimal_briefly(&out_dir, &["--config", config.to_str().unwrap()]);
     // The base's height and the wheel modules off the ground: two values more for the critic,
     // normalised with the rest in training; the policy file takes the 19 alone (eval checks
     // its input's width against Minimal's observation).
@@ -293,17 +298,7 @@ fn a_critic_that_sees_more_trains_and_exports_a_policy_of_the_policys_observatio
 #[test]
 fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
     let out_dir = std::env::temp_dir().join(format!("kumi-train-wb-{}", std::process::id()));
-    let out = kumi(&[
-        "train",
-        "whole-body",
-        "minimal",
-        "--steps",
-        "4096",
-        "--out",
-        out_dir.to_str().unwrap(),
-    ]);
-    let progress = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{progress}");
+    let progress = train_minimal_briefly(&out_dir, &[]);
     assert!(
         progress.contains("minimal (hierarchical): 19 observations, 7 actions"),
         "{progress}"
@@ -460,19 +455,7 @@ fn action_noise_in_evaluation_changes_episodes_reproducibly_and_must_be_a_std() 
 #[test]
 fn the_flat_baseline_trains_evaluates_and_is_not_taken_for_a_policy_over_the_skill() {
     let out_dir = std::env::temp_dir().join(format!("kumi-train-flat-{}", std::process::id()));
-    let out = kumi(&[
-        "train",
-        "whole-body",
-        "minimal",
-        "--variant",
-        "flat",
-        "--steps",
-        "4096",
-        "--out",
-        out_dir.to_str().unwrap(),
-    ]);
-    let progress = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{progress}");
+    let progress = train_minimal_briefly(&out_dir, &["--variant", "flat"]);
     // 10 + 2 wheel velocities + 8 previous actions + 7 joint angles + 7 joint velocities.
     assert!(
         progress.contains("minimal (flat): 34 observations, 8 actions")
