@@ -274,6 +274,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
             replay: None,    // training's: evaluation starts every episode afresh
             randomize: None, // training's: evaluation runs the robot's own physics
             critic: Default::default(), // training's: what only the critic sees
+            observation_noise: Default::default(), // training's
             ..file.environment(engine)?
         };
         let result = kumi_train::evaluate_body::evaluate_body(

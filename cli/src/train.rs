@@ -12,6 +12,7 @@ use kumi_terms::ObservationOptions;
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig};
 use kumi_train::body_reward::{BodyWeights, PenaltyWeights};
 use kumi_train::env::Environment;
+use kumi_train::noise::ObservationNoise;
 use kumi_train::ppo::trainer::{IterationStats, PpoConfig, Trainer};
 use kumi_train::randomize::RandomizeConfig;
 use kumi_train::replay::ReplayConfig;
@@ -239,6 +240,10 @@ pub struct TrainBodyConfig {
     /// hash then).
     #[serde(default, skip_serializing_if = "CriticObservation::is_none")]
     pub critic: CriticObservation,
+    /// Noise on the policy's observation in training, per slot (none when the section is
+    /// absent or all zero, and out of the hash then).
+    #[serde(default, skip_serializing_if = "ObservationNoise::is_none")]
+    pub observation_noise: ObservationNoise,
 }
 
 impl TrainBodyConfig {
@@ -265,6 +270,7 @@ impl TrainBodyConfig {
             replay: self.replay,
             randomize: self.randomize,
             critic: self.critic,
+            observation_noise: self.observation_noise.clone(),
         })
     }
 
@@ -702,6 +708,12 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
             envs[0].observation_dim(),
         );
     }
+    if !file.observation_noise.is_none() {
+        eprintln!(
+            "training noises the observation ([observation_noise], standard deviations in each slot's unit: {}); evaluation and the policy file do not",
+            serde_json::to_string(&file.observation_noise)?,
+        );
+    }
     let name = args.variant.policy_name(&model.name);
     let out = args
         .out
@@ -916,14 +928,23 @@ mod tests {
 
     #[test]
     fn the_training_only_sections_are_optional_out_of_the_hash_when_absent_and_off_in_eval() {
-        // [push], [replay], [critic] and [ppo]'s critic_learning_rate change training, not the policy:
-        // absent, none is serialised, so every shipped policy keeps its config hash.
+        // [push], [replay], [critic], [observation_noise] and [ppo]'s critic_learning_rate change
+        // training, not the policy: absent, none is serialised, so every shipped policy keeps its
+        // config hash.
         for (_, _, text) in SHIPPED_BODY_CONFIGS.iter().chain(&SHIPPED_LAST_STAGES) {
             let plain: TrainBodyConfig = toml::from_str(text).unwrap();
             assert!(plain.push.is_none() && plain.replay.is_none());
             assert!(plain.ppo.critic_learning_rate.is_none() && plain.critic.is_none());
+            assert!(plain.observation_noise.is_none());
             let json = serde_json::to_string(&plain).unwrap();
-            for key in ["push", "replay", "critic_learning_rate", "\"critic\""] {
+            let keys = [
+                "push",
+                "replay",
+                "critic_learning_rate",
+                "\"critic\"",
+                "noise",
+            ];
+            for key in keys {
                 assert!(!json.contains(key), "{key} in {json}");
             }
         }
@@ -951,6 +972,16 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("base_heigth"), "{err}");
+        let noised = format!("{with}\n[observation_noise]\nprojected_gravity = 0.02\n");
+        let noised: TrainBodyConfig = toml::from_str(&noised).unwrap();
+        let env = noised.environment(kumi_worlds::Engine::Rapier).unwrap();
+        assert_eq!(env.observation_noise.0["projected_gravity"], 0.02);
+        assert!(serde_json::to_string(&noised)
+            .unwrap()
+            .contains("\"observation_noise\":{\"projected_gravity\":0.02}"));
+        let zero = format!("{with}\n[observation_noise]\nprojected_gravity = 0.0\n");
+        let zero: TrainBodyConfig = toml::from_str(&zero).unwrap();
+        assert!(!serde_json::to_string(&zero).unwrap().contains("noise"));
         let env = config.environment(kumi_worlds::Engine::Rapier).unwrap();
         assert_eq!(env.push.unwrap().tip_rad_s, 1.0);
         assert_eq!(env.replay.unwrap().capacity, 16);

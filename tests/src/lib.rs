@@ -375,6 +375,7 @@ pub fn whole_body_config(
         replay: None,
         randomize: None,
         critic: Default::default(),
+        observation_noise: Default::default(),
     }
 }
 

@@ -91,8 +91,8 @@ impl Environment for crate::arm_reach::ArmReach {
     }
 }
 
-/// The whole-body environment in training: the policy's observation, then what only the
-/// critic sees (`[critic]`; nothing without it).
+/// The whole-body environment in training: the policy's observation, noised by
+/// `[observation_noise]`, then what only the critic sees (`[critic]`; nothing without it).
 impl Environment for crate::whole_body::WholeBody {
     fn observation_dim(&self) -> usize {
         crate::whole_body::WholeBody::observation_dim(self) + self.critic_extras_dim()
@@ -108,6 +108,7 @@ impl Environment for crate::whole_body::WholeBody {
 
     fn reset(&mut self) -> Vec<f32> {
         let mut observation = crate::whole_body::WholeBody::reset(self);
+        self.add_observation_noise(&mut observation);
         observation.extend(self.critic_extras());
         observation
     }
@@ -126,6 +127,7 @@ impl Environment for crate::whole_body::WholeBody {
             metrics.push((BODY_METRICS[1], o.yaw_error));
         }
         let mut observation = o.observation;
+        self.add_observation_noise(&mut observation);
         observation.extend(self.critic_extras());
         Transition {
             observation,

@@ -11,6 +11,7 @@ pub mod evaluate;
 pub mod evaluate_body;
 pub mod export;
 pub mod nn;
+pub mod noise;
 pub mod ppo;
 pub mod randomize;
 pub mod replay;

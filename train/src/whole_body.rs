@@ -30,6 +30,7 @@ use crate::body_reward::{
     rock_penalty, tilt, tilt_penalty, turn_penalty, BodyTerms, BodyWeights, PenaltyWeights,
 };
 use crate::evaluate_body::{leg_angles, ContactRule};
+use crate::noise::{NoiseSource, ObservationNoise};
 use crate::randomize::RandomizeConfig;
 use crate::replay::{Replay, ReplayConfig};
 
@@ -163,6 +164,8 @@ pub struct WholeBodyConfig {
     pub randomize: Option<RandomizeConfig>,
     /// What only the critic sees (training; none: the critic reads the policy's observation).
     pub critic: CriticObservation,
+    /// Noise on the policy's observation (training; none: exact readings).
+    pub observation_noise: ObservationNoise,
 }
 
 /// What only the critic sees (`[critic]` in a whole-body config; training only): an asymmetric
@@ -257,6 +260,8 @@ pub struct WholeBody {
     config: WholeBodyConfig,
     episode_steps: usize,
     rng: ChaCha8Rng,
+    /// `[observation_noise]`'s draws (training only: see [`WholeBody::add_observation_noise`]).
+    noise: NoiseSource,
     target: Target,
     previous_action: Vec<f32>,
     /// The wheel commands' rate limit (the policy's wheel acceleration).
@@ -352,6 +357,7 @@ impl WholeBody {
             config,
             episode_steps,
             rng: ChaCha8Rng::seed_from_u64(seed),
+            noise: NoiseSource::silent(),
             target: Target {
                 position_w: Vector3::zeros(),
                 yaw: 0.0,
@@ -361,6 +367,12 @@ impl WholeBody {
             replay: replay.map(|r| Replay::new(r, sim.control_hz)),
             replayed: false,
         };
+        let noise_std = env
+            .config
+            .observation_noise
+            .per_value(&env.slots())
+            .map_err(EnvError::Goals)?;
+        env.noise = NoiseSource::new(noise_std, seed);
         env.reset();
         Ok(env)
     }
@@ -375,12 +387,23 @@ impl WholeBody {
         &self.terms
     }
 
-    pub fn observation_dim(&self) -> usize {
+    /// The policy's observation slots, in order.
+    pub fn slots(&self) -> Vec<body_obs::ObservationSlot> {
         let options = self.config.observation;
         let arm_joints = self.arms.iter().map(|a| a.joints.len()).sum();
         let wheels = self.wheel_joints.len();
         let slots = body_obs::slots(wheels, arm_joints, self.terms.size(), options);
-        body_obs::size(&body_obs::with_arm_state(slots, self.flat_joints()))
+        body_obs::with_arm_state(slots, self.flat_joints())
+    }
+
+    pub fn observation_dim(&self) -> usize {
+        body_obs::size(&self.slots())
+    }
+
+    /// Adds `[observation_noise]` to the policy's observation at the start of `obs` (training
+    /// only; nothing without the section). Values past the policy's observation are untouched.
+    pub fn add_observation_noise(&mut self, obs: &mut [f32]) {
+        self.noise.apply(obs);
     }
 
     /// How many values only the critic sees ([`CriticObservation`]).

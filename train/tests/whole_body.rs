@@ -54,6 +54,7 @@ fn config(tilt_limit_rad: f64) -> WholeBodyConfig {
         replay: None,
         randomize: None,
         critic: Default::default(),
+        observation_noise: Default::default(),
         arms: ArmControl::Skill(GoalBounds {
             manipulator_position_m: 0.25,
             manipulator_rotation_rad: 0.5,
@@ -906,4 +907,77 @@ fn unset_wheel_bounds_leave_a_configs_serialisation_as_it_was() {
     };
     let text = serde_json::to_string(&governed).unwrap();
     assert!(text.contains("\"lateral_acceleration_m_s2\":0.1"), "{text}");
+}
+
+#[test]
+fn training_noise_moves_only_the_noised_slots_and_never_the_episode() {
+    use kumi_train::env::Environment;
+    use kumi_train::noise::ObservationNoise;
+    use kumi_train::whole_body::CriticObservation;
+    let noise = |pairs: &[(&str, f64)]| {
+        ObservationNoise(pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect())
+    };
+    let critic = CriticObservation {
+        base_height: true,
+        ..Default::default()
+    };
+    let noised = WholeBodyConfig {
+        observation_noise: noise(&[("tool_to_target", 0.05), ("wheel_velocities", 0.3)]),
+        critic,
+        ..config(1.5)
+    };
+    let mut plain = WholeBody::new(
+        model("tricycle"),
+        WholeBodyConfig {
+            critic,
+            ..config(1.5)
+        },
+        &skill(),
+        4,
+    )
+    .unwrap();
+    let mut with = WholeBody::new(model("tricycle"), noised, &skill(), 4).unwrap();
+    // Which values are noised: tool_to_target's 3 and the 6 wheels' velocities, by the slots.
+    let mut noised_values = vec![false; with.observation_dim()];
+    let mut at = 0;
+    for slot in with.slots() {
+        if ["tool_to_target", "wheel_velocities"].contains(&slot.name) {
+            noised_values[at..at + slot.size].fill(true);
+        }
+        at += slot.size;
+    }
+    assert_eq!(noised_values.iter().filter(|n| **n).count(), 9);
+    let check = |seen: &[f32], env: &WholeBody| {
+        let exact = env.observation();
+        for (i, (s, e)) in seen.iter().zip(&exact).enumerate() {
+            assert_eq!(s != e, noised_values[i], "value {i}: {s} against {e}");
+            assert!((s - e).abs() < 0.3 * 6.0, "value {i}: {s} against {e}");
+        }
+        assert_eq!(
+            seen[exact.len()..],
+            env.critic_extras()[..],
+            "the critic's extras are exact"
+        );
+    };
+    let seen = Environment::reset(&mut with);
+    check(&seen, &with);
+    Environment::reset(&mut plain);
+    let action = vec![0.5; with.terms().size()];
+    for _ in 0..10 {
+        let seen = Environment::step(&mut with, &action).observation;
+        check(&seen, &with);
+        Environment::step(&mut plain, &action);
+        // The noise has its own stream: the same seed, the same episode, bit for bit.
+        assert_eq!(with.observation(), plain.observation());
+        assert_eq!(with.target(), plain.target());
+    }
+
+    let typo = WholeBodyConfig {
+        observation_noise: noise(&[("tool_to_targets", 0.05)]),
+        ..config(1.5)
+    };
+    let Err(e) = WholeBody::new(model("tricycle"), typo, &skill(), 4) else {
+        panic!("a misspelt slot was accepted");
+    };
+    assert!(e.to_string().contains("`tool_to_targets`"), "{e}");
 }
