@@ -245,9 +245,41 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
 }
 
 #[test]
+fn a_misspelt_noise_slot_is_refused_by_name_before_training() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let text = std::fs::read_to_string(root.join("train/configs/whole_body/minimal.toml")).unwrap();
+    let out_dir = std::env::temp_dir().join(format!("kumi-train-noise-{}", std::process::id()));
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let config = out_dir.join("noise.toml");
+    std::fs::write(
+        &config,
+        format!("{text}\n[observation_noise]\nprojected_gravty = 0.01\n"),
+    )
+    .unwrap();
+    let out = kumi(&[
+        "train",
+        "whole-body",
+        "minimal",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("`projected_gravty`") && stderr.contains("projected_gravity,"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!out_dir.join("checkpoint").exists(), "nothing was trained");
+    std::fs::remove_dir_all(&out_dir).unwrap();
+}
+
+#[test]
 fn a_critic_that_sees_more_trains_and_exports_a_policy_of_the_policys_observation() {
-    // [critic]: the value function reads the robot's state beyond Table III in training; the
-    // exported policy takes the 19 values of Minimal's observation, as the node and eval
+    // [critic]: the value function reads the robot's state beyond Table III in training (and
+    // [observation_noise] noises the policy's part of it only); the exported policy takes the 19 values of Minimal's observation, as the node and eval
     // build them, and evaluates against the same config.
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let text = std::fs::read_to_string(root.join("train/configs/whole_body/minimal.toml")).unwrap();
@@ -256,10 +288,15 @@ fn a_critic_that_sees_more_trains_and_exports_a_policy_of_the_policys_observatio
     let config = out_dir.join("critic.toml");
     std::fs::write(
         &config,
-        format!("{text}\n[critic]\nbase_height = true\nwheel_modules_off_ground = true\n"),
+        format!("{text}\n[critic]\nbase_height = true\nwheel_modules_off_ground = true\n\n[observation_noise]\nprojected_gravity = 0.01\n"),
     )
     .unwrap();
     let progress = train_minimal_briefly(&out_dir, &["--config", config.to_str().unwrap()]);
+    assert!(
+        progress.contains("training noises the observation")
+            && progress.contains("{\"projected_gravity\":0.01}"),
+        "{progress}"
+    );
     // The base's height and the wheel modules off the ground: two values more for the critic,
     // normalised with the rest in training; the policy file takes the 19 alone (eval checks
     // its input's width against Minimal's observation).

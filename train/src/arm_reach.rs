@@ -63,6 +63,9 @@ pub enum EnvError {
     Kinematics(String),
     #[error("goal distribution: {0}")]
     Goals(String),
+    /// A training setting of the config that cannot apply to this robot (the message names it).
+    #[error("{0}")]
+    Settings(String),
 }
 
 /// The goal distribution as a config file states it (`[goals]` in

@@ -371,7 +371,7 @@ impl WholeBody {
             .config
             .observation_noise
             .per_value(&env.slots())
-            .map_err(EnvError::Goals)?;
+            .map_err(EnvError::Settings)?;
         env.noise = NoiseSource::new(noise_std, seed);
         env.reset();
         Ok(env)
