@@ -942,7 +942,7 @@ mod tests {
                 "replay",
                 "critic_learning_rate",
                 "\"critic\"",
-                "noise",
+                "observation_noise",
             ];
             for key in keys {
                 assert!(!json.contains(key), "{key} in {json}");
@@ -972,7 +972,10 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("base_heigth"), "{err}");
-        let noised = format!("{with}\n[observation_noise]\nprojected_gravity = 0.02\n");
+        // Set, it is in the hash; a slot at 0 is a slot left out, there as everywhere.
+        let noised = format!(
+            "{with}\n[observation_noise]\nprojected_gravity = 0.02\nbase_linear_velocity = 0.0\n"
+        );
         let noised: TrainBodyConfig = toml::from_str(&noised).unwrap();
         let env = noised.environment(kumi_worlds::Engine::Rapier).unwrap();
         assert_eq!(env.observation_noise.0["projected_gravity"], 0.02);
@@ -981,7 +984,9 @@ mod tests {
             .contains("\"observation_noise\":{\"projected_gravity\":0.02}"));
         let zero = format!("{with}\n[observation_noise]\nprojected_gravity = 0.0\n");
         let zero: TrainBodyConfig = toml::from_str(&zero).unwrap();
-        assert!(!serde_json::to_string(&zero).unwrap().contains("noise"));
+        assert!(!serde_json::to_string(&zero)
+            .unwrap()
+            .contains("observation_noise"));
         let env = config.environment(kumi_worlds::Engine::Rapier).unwrap();
         assert_eq!(env.push.unwrap().tip_rad_s, 1.0);
         assert_eq!(env.replay.unwrap().capacity, 16);

@@ -278,9 +278,10 @@ fn a_misspelt_noise_slot_is_refused_by_name_before_training() {
 
 #[test]
 fn a_critic_that_sees_more_trains_and_exports_a_policy_of_the_policys_observation() {
-    // [critic]: the value function reads the robot's state beyond Table III in training (and
-    // [observation_noise] noises the policy's part of it only); the exported policy takes the 19 values of Minimal's observation, as the node and eval
-    // build them, and evaluates against the same config.
+    // [critic]: the value function reads the robot's state beyond Table III in training, and
+    // [observation_noise] noises the policy's observation, not those extras. The exported
+    // policy takes the 19 values of Minimal's observation, as the node and eval build them,
+    // and evaluates against the same config.
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let text = std::fs::read_to_string(root.join("train/configs/whole_body/minimal.toml")).unwrap();
     let out_dir = std::env::temp_dir().join(format!("kumi-train-critic-{}", std::process::id()));
@@ -288,7 +289,10 @@ fn a_critic_that_sees_more_trains_and_exports_a_policy_of_the_policys_observatio
     let config = out_dir.join("critic.toml");
     std::fs::write(
         &config,
-        format!("{text}\n[critic]\nbase_height = true\nwheel_modules_off_ground = true\n\n[observation_noise]\nprojected_gravity = 0.01\n"),
+        format!(
+            "{text}\n[critic]\nbase_height = true\nwheel_modules_off_ground = true\n\n\
+             [observation_noise]\nprojected_gravity = 0.01\n"
+        ),
     )
     .unwrap();
     let progress = train_minimal_briefly(&out_dir, &["--config", config.to_str().unwrap()]);

@@ -15,11 +15,24 @@ use rand_distr::{Distribution, StandardNormal};
 /// `[observation_noise]`: the standard deviation of the noise on each named observation slot,
 /// in that slot's unit (`base_linear_velocity = 0.05` is 0.05 m/s on each of its three values).
 /// Slots left out get none.
-#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize)]
 #[serde(transparent)]
 pub struct ObservationNoise(pub BTreeMap<String, f64>);
 
+/// Written without its zero entries: a slot set to 0 is a slot left out, and the config's hash
+/// says so.
+impl serde::Serialize for ObservationNoise {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_map(self.0.iter().filter(|(_, std)| **std != 0.0))
+    }
+}
+
 impl ObservationNoise {
+    /// Noise on the named slots, with these standard deviations.
+    pub fn from_pairs(pairs: &[(&str, f64)]) -> Self {
+        Self(pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect())
+    }
+
     /// True when no slot is noised.
     pub fn is_none(&self) -> bool {
         self.0.values().all(|std| *std == 0.0)
@@ -102,7 +115,7 @@ mod tests {
     }
 
     fn noise(pairs: &[(&str, f64)]) -> ObservationNoise {
-        ObservationNoise(pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect())
+        ObservationNoise::from_pairs(pairs)
     }
 
     #[test]

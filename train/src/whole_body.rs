@@ -357,7 +357,7 @@ impl WholeBody {
             config,
             episode_steps,
             rng: ChaCha8Rng::seed_from_u64(seed),
-            noise: NoiseSource::silent(),
+            noise: NoiseSource::silent(), // set below, from the slots of the built environment
             target: Target {
                 position_w: Vector3::zeros(),
                 yaw: 0.0,
@@ -473,7 +473,8 @@ impl WholeBody {
         self.target = target;
     }
 
-    /// Restarts the random stream (evaluation seeds each episode).
+    /// Restarts the episodes' random stream (evaluation seeds each episode). The training
+    /// noise's stream goes on: evaluation has none.
     pub fn reseed(&mut self, seed: u64) {
         self.rng = ChaCha8Rng::seed_from_u64(seed);
     }

@@ -914,9 +914,7 @@ fn training_noise_moves_only_the_noised_slots_and_never_the_episode() {
     use kumi_train::env::Environment;
     use kumi_train::noise::ObservationNoise;
     use kumi_train::whole_body::CriticObservation;
-    let noise = |pairs: &[(&str, f64)]| {
-        ObservationNoise(pairs.iter().map(|(k, v)| (k.to_string(), *v)).collect())
-    };
+    let noise = ObservationNoise::from_pairs;
     let critic = CriticObservation {
         base_height: true,
         ..Default::default()
@@ -971,6 +969,11 @@ fn training_noise_moves_only_the_noised_slots_and_never_the_episode() {
         assert_eq!(with.observation(), plain.observation());
         assert_eq!(with.target(), plain.target());
     }
+    // After 10 steps' draws of noise, the next episode is still the one without noise draws.
+    Environment::reset(&mut with);
+    Environment::reset(&mut plain);
+    assert_eq!(with.target(), plain.target());
+    assert_eq!(with.observation(), plain.observation());
 
     let typo = WholeBodyConfig {
         observation_noise: noise(&[("tool_to_targets", 0.05)]),
