@@ -38,6 +38,18 @@ fn train_minimal_briefly(out_dir: &std::path::Path, extra: &[&str]) -> String {
     String::from_utf8_lossy(&kumi_ok(&args).stderr).into_owned()
 }
 
+/// A fresh folder `kumi-train-{tag}-PID` under the temp dir, holding `{tag}.toml`: Minimal's
+/// shipped whole-body config with `extra` appended. Returns the folder and the config's path.
+fn minimal_config_with(tag: &str, extra: &str) -> (std::path::PathBuf, std::path::PathBuf) {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let text = std::fs::read_to_string(root.join("train/configs/whole_body/minimal.toml")).unwrap();
+    let out_dir = std::env::temp_dir().join(format!("kumi-train-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let config = out_dir.join(format!("{tag}.toml"));
+    std::fs::write(&config, format!("{text}\n{extra}")).unwrap();
+    (out_dir, config)
+}
+
 /// Runs `kumi`, which must succeed, and parses its stdout as JSON.
 fn kumi_json<T: serde::de::DeserializeOwned>(args: &[&str]) -> T {
     serde_json::from_slice(&kumi_ok(args).stdout).unwrap()
@@ -246,16 +258,8 @@ fn train_arm_runs_the_shipped_config_and_writes_metrics() {
 
 #[test]
 fn a_misspelt_noise_slot_is_refused_by_name_before_training() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let text = std::fs::read_to_string(root.join("train/configs/whole_body/minimal.toml")).unwrap();
-    let out_dir = std::env::temp_dir().join(format!("kumi-train-noise-{}", std::process::id()));
-    std::fs::create_dir_all(&out_dir).unwrap();
-    let config = out_dir.join("noise.toml");
-    std::fs::write(
-        &config,
-        format!("{text}\n[observation_noise]\nprojected_gravty = 0.01\n"),
-    )
-    .unwrap();
+    let (out_dir, config) =
+        minimal_config_with("noise", "[observation_noise]\nprojected_gravty = 0.01\n");
     let out = kumi(&[
         "train",
         "whole-body",
@@ -282,19 +286,11 @@ fn a_critic_that_sees_more_trains_and_exports_a_policy_of_the_policys_observatio
     // [observation_noise] noises the policy's observation, not those extras. The exported
     // policy takes the 19 values of Minimal's observation, as the node and eval build them,
     // and evaluates against the same config.
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let text = std::fs::read_to_string(root.join("train/configs/whole_body/minimal.toml")).unwrap();
-    let out_dir = std::env::temp_dir().join(format!("kumi-train-critic-{}", std::process::id()));
-    std::fs::create_dir_all(&out_dir).unwrap();
-    let config = out_dir.join("critic.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "{text}\n[critic]\nbase_height = true\nwheel_modules_off_ground = true\n\n\
-             [observation_noise]\nprojected_gravity = 0.01\n"
-        ),
-    )
-    .unwrap();
+    let (out_dir, config) = minimal_config_with(
+        "critic",
+        "[critic]\nbase_height = true\nwheel_modules_off_ground = true\n\n\
+         [observation_noise]\nprojected_gravity = 0.01\n",
+    );
     let progress = train_minimal_briefly(&out_dir, &["--config", config.to_str().unwrap()]);
     assert!(
         progress.contains("training noises the observation")
