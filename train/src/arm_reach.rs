@@ -63,9 +63,16 @@ pub enum EnvError {
     Kinematics(String),
     #[error("goal distribution: {0}")]
     Goals(String),
-    /// A training setting of the config that cannot apply to this robot (the message names it).
+    /// A setting of the config that is invalid or cannot apply to this robot (the message names
+    /// its section).
     #[error("{0}")]
     Settings(String),
+    /// The robot cannot carry the task (the message names the robot).
+    #[error("{0}")]
+    Robot(String),
+    /// The skill file does not drive this robot's arm modules.
+    #[error("the skill: {0}")]
+    SkillFile(String),
 }
 
 /// The goal distribution as a config file states it (`[goals]` in

@@ -63,7 +63,7 @@ impl TaskConfig {
         if ok {
             Ok(())
         } else {
-            Err(EnvError::Goals(format!("invalid [task]: {self:?}")))
+            Err(EnvError::Settings(format!("invalid [task]: {self:?}")))
         }
     }
 }
@@ -94,7 +94,7 @@ impl PushConfig {
         if ok && speeds.iter().all(|v| v.is_finite() && *v >= 0.0) {
             Ok(())
         } else {
-            Err(EnvError::Goals(format!(
+            Err(EnvError::Settings(format!(
                 "invalid [push]: the interval must be a positive range [lo, hi] [s], the \
                  velocity [m/s] and the tip rate [rad/s] finite and >= 0: {self:?}"
             )))
@@ -292,11 +292,11 @@ impl WholeBody {
         if let Some(replay) = &config.replay {
             replay
                 .check(config.task.tilt_limit_rad)
-                .map_err(EnvError::Goals)?;
+                .map_err(EnvError::Settings)?;
         }
         let manipulators: Vec<_> = model.modules_with_role(Role::Manipulator).collect();
         let [manipulator] = manipulators.as_slice() else {
-            return Err(EnvError::Goals(format!(
+            return Err(EnvError::Robot(format!(
                 "the whole-body task needs exactly one manipulator; `{}` has {}",
                 model.name,
                 manipulators.len()
@@ -309,10 +309,10 @@ impl WholeBody {
         let terms = config
             .arms
             .terms(&model)
-            .map_err(|e| EnvError::Goals(e.to_string()))?;
+            .map_err(|e| EnvError::Settings(format!("action terms: {e}")))?;
         let mut sim = SimConfig::for_model(&model);
         if let Some(randomize) = &config.randomize {
-            randomize.check().map_err(EnvError::Goals)?;
+            randomize.check().map_err(EnvError::Settings)?;
             sim = randomize.apply(sim, seed);
         }
         let world = kumi_worlds::build(config.engine, model.clone(), sim)?;
@@ -351,7 +351,7 @@ impl WholeBody {
             wheel_modules,
             wheel_joints,
             tool_link,
-            tool_chain: ToolChain::new(&model).map_err(EnvError::Goals)?,
+            tool_chain: ToolChain::new(&model).map_err(EnvError::Robot)?,
             skill,
             contact_rule: ContactRule::new(&model),
             config,
@@ -758,14 +758,14 @@ impl WholeBody {
 fn load_skill(bytes: &[u8], arms: &[ArmIo]) -> Result<SkillPolicy, EnvError> {
     let first = arms
         .first()
-        .ok_or_else(|| EnvError::Goals("no arm module for the skill to drive".into()))?;
+        .ok_or_else(|| EnvError::Robot("no arm module for the skill to drive".into()))?;
     let skill =
         SkillPolicy::from_bytes(bytes.to_vec(), "skill", &first.skill, BackendChoice::Tract)
-            .map_err(|e| EnvError::Goals(e.to_string()))?;
+            .map_err(|e| EnvError::SkillFile(e.to_string()))?;
     for arm in &arms[1..] {
         arm.skill
             .check(skill.metadata())
-            .map_err(|e| EnvError::Goals(format!("skill for module `{}`: {e}", arm.module)))?;
+            .map_err(|e| EnvError::SkillFile(format!("module `{}`: {e}", arm.module)))?;
     }
     Ok(skill)
 }
@@ -825,7 +825,7 @@ mod tests {
                 tip_rad_s,
             };
             let error = push.check().unwrap_err().to_string();
-            assert!(error.contains("[push]"), "{error}");
+            assert!(error.starts_with("invalid [push]: "), "{error}");
         }
         PUSH.check().unwrap();
     }

@@ -160,7 +160,10 @@ fn each_environment_draws_its_own_physics_and_bad_ranges_are_refused() {
         .err()
         .expect("an empty range is refused")
         .to_string();
-    assert!(message.contains("ground_friction"), "{message}");
+    assert!(
+        message.starts_with("invalid [randomize] ground_friction: "),
+        "the message names the section and the range, nothing else: {message}"
+    );
 }
 
 #[test]
@@ -603,7 +606,7 @@ fn the_airborne_penalty_counts_the_wheel_modules_off_the_ground() {
 }
 
 #[test]
-fn a_morphology_without_one_manipulator_is_refused() {
+fn a_bad_task_or_skill_is_refused_naming_what_is_wrong() {
     let err = WholeBody::new(model("arm"), config(1.0), &skill(), 0);
     assert!(
         err.is_ok(),
@@ -614,11 +617,27 @@ fn a_morphology_without_one_manipulator_is_refused() {
     let err = WholeBody::new(model("tricycle"), bad, &skill(), 0)
         .err()
         .unwrap();
-    assert!(err.to_string().contains("target_z_m"), "{err}");
+    let message = err.to_string();
+    assert!(message.starts_with("invalid [task]: "), "{message}");
+    assert!(message.contains("target_z_m"), "{message}");
     let err = WholeBody::new(model("tricycle"), config(1.0), b"not onnx", 0)
         .err()
         .unwrap();
-    assert!(err.to_string().contains("not an ONNX model"), "{err}");
+    let message = err.to_string();
+    assert!(message.starts_with("the skill: "), "{message}");
+    assert!(message.contains("not an ONNX model"), "{message}");
+    let mut replay = config(1.0);
+    replay.replay = Some(kumi_train::replay::ReplayConfig {
+        tilt_rad: 1.2,
+        before_s: 1.0,
+        probability: 0.5,
+        capacity: 8,
+    });
+    let err = WholeBody::new(model("tricycle"), replay, &skill(), 0)
+        .err()
+        .expect("a replay tilt past the task's limit is refused");
+    let message = err.to_string();
+    assert!(message.starts_with("invalid [replay]: "), "{message}");
 }
 
 /// How far [m] the tool may stray from a goal the skill starts on (a fixed arm at `home` with
