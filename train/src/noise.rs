@@ -7,7 +7,7 @@
 
 use std::collections::BTreeMap;
 
-use kumi_terms::observation::ObservationSlot;
+use kumi_terms::observation::{ObservationSlot, OPTIONAL_SLOTS};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -45,9 +45,14 @@ impl ObservationNoise {
         for (name, std) in &self.0 {
             if !slots.iter().any(|s| s.name == name) {
                 let known: Vec<&str> = slots.iter().map(|s| s.name).collect();
+                let hint = if OPTIONAL_SLOTS.contains(&name.as_str()) {
+                    format!("; `{name}` is an optional slot: turn it on in [observation]")
+                } else {
+                    String::new()
+                };
                 return Err(format!(
                     "[observation_noise] names `{name}`, which is no slot of this observation \
-                     (its slots: {})",
+                     (its slots: {}){hint}",
                     known.join(", ")
                 ));
             }
@@ -132,6 +137,14 @@ mod tests {
     fn an_unknown_slot_or_a_bad_deviation_is_refused_by_name() {
         let e = noise(&[("d", 0.1)]).per_value(&slots()).unwrap_err();
         assert!(e.contains("`d`") && e.contains("a, b, c"), "{e}");
+        assert!(!e.contains("optional"), "{e}");
+        let e = noise(&[("arm_joint_angles", 0.1)])
+            .per_value(&slots())
+            .unwrap_err();
+        assert!(
+            e.ends_with("`arm_joint_angles` is an optional slot: turn it on in [observation]"),
+            "an optional slot switched off says where to switch it on: {e}"
+        );
         for bad in [-0.1, f64::NAN, f64::INFINITY] {
             let e = noise(&[("b", bad)]).per_value(&slots()).unwrap_err();
             assert!(e.contains("b = "), "{e}");

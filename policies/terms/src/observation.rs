@@ -24,6 +24,9 @@ pub const BASE_ANGULAR_VELOCITY: &str = "base_angular_velocity";
 /// The name of the optional arm joint angle slot ([`ObservationOptions`]).
 pub const ARM_JOINT_ANGLES: &str = "arm_joint_angles";
 
+/// The optional slots' names, each a field of [`ObservationOptions`].
+pub const OPTIONAL_SLOTS: [&str; 2] = [BASE_ANGULAR_VELOCITY, ARM_JOINT_ANGLES];
+
 /// Slots a policy may observe beyond Table III (`[observation]` in a whole-body config; none
 /// by default). A policy file names them in its observation description, so whoever runs it
 /// reads them from there ([`ObservationOptions::from_description`]).
