@@ -67,7 +67,7 @@ pub enum EnvError {
     /// its section).
     #[error("{0}")]
     Settings(String),
-    /// The robot cannot carry the task (the message names the robot).
+    /// The robot cannot carry the task (the message says what it lacks).
     #[error("{0}")]
     Robot(String),
     /// The skill file does not drive this robot's arm modules.
