@@ -11,6 +11,21 @@ use kumi_model::ModuleInstance;
 use crate::metadata;
 use crate::observation::{JOINTS, OBSERVATION_DIM, OBSERVATION_NAMES};
 
+/// The bound [policy units] the skill's action values are clipped to before they are scaled
+/// to joint increments ([`ArmSkill::increments`]).
+pub const ACTION_LIMIT: f64 = 1.0;
+
+/// How many of `action`'s values lie past +-[`ACTION_LIMIT`], where clipping makes them all
+/// the largest increment. A skill whose mean actions mostly lie there acts as a relay: around a
+/// goal it has reached it swings between its largest increments instead of settling
+/// (`policies/arm_reach.md`). Non-finite values are not counted (they hold).
+pub fn values_past_limit(action: &[f32]) -> usize {
+    action
+        .iter()
+        .filter(|a| a.is_finite() && f64::from(a.abs()) > ACTION_LIMIT)
+        .count()
+}
+
 /// The skill's view of one arm module.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArmSkill {
@@ -93,14 +108,15 @@ impl ArmSkill {
         })
     }
 
-    /// The joint increments [rad] for a policy output: each value clipped to [-1, 1] and scaled
-    /// by its joint's [`Self::increment_scale`]. A non-finite output becomes 0 (hold).
+    /// The joint increments [rad] for a policy output: each value clipped to
+    /// [-[`ACTION_LIMIT`], [`ACTION_LIMIT`]] and scaled by its joint's [`Self::increment_scale`].
+    /// A non-finite output becomes 0 (hold).
     pub fn increments(&self, action: &[f32; JOINTS]) -> [f64; JOINTS] {
         let mut out = [0.0; JOINTS];
         for ((o, a), scale) in out.iter_mut().zip(action).zip(&self.increment_scale) {
             let a = f64::from(*a);
             *o = if a.is_finite() {
-                a.clamp(-1.0, 1.0) * scale
+                a.clamp(-ACTION_LIMIT, ACTION_LIMIT) * scale
             } else {
                 0.0
             };
@@ -130,7 +146,7 @@ impl ArmSkill {
             (metadata::ACTION_DIM_KEY, JOINTS.to_string()),
             (metadata::JOINT_NAMES, self.joints.join(",")),
             (metadata::ACTION_SCALE, join(&self.increment_scale)),
-            (metadata::ACTION_CLIP, "1".to_string()),
+            (metadata::ACTION_CLIP, ACTION_LIMIT.to_string()),
             (metadata::CONTROL_HZ, self.control_hz.to_string()),
         ]
         .into_iter()
@@ -205,6 +221,16 @@ mod tests {
         assert!((skill.increment_scale[3] - 0.05).abs() < 1e-15);
         let inc = skill.increments(&[0.5, -0.5, 2.0, -3.0, 0.0, f32::NAN, f32::INFINITY]);
         assert_eq!(inc, [0.025, -0.025, 0.05, -0.05, 0.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn values_past_the_limit_are_counted_by_hand() {
+        assert_eq!(values_past_limit(&[0.5, -0.5, 1.0, -1.0, 0.0]), 0);
+        assert_eq!(
+            values_past_limit(&[1.01, -3.0, 0.99, f32::NAN, f32::INFINITY]),
+            2
+        );
+        assert_eq!(values_past_limit(&[]), 0);
     }
 
     #[test]

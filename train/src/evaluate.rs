@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use kumi_model::RobotModel;
 use kumi_policies::observation::{JOINTS, OBSERVATION_DIM};
+use kumi_policies::skill::values_past_limit;
 use rayon::prelude::*;
 
 use crate::arm_reach::{ArmReach, ArmReachConfig, EnvError};
@@ -76,6 +77,11 @@ pub struct Evaluation {
     pub rollouts: usize,
     pub position_error_m: ErrorStats,
     pub orientation_error_rad: ErrorStats,
+    /// The share (0-1) of the policy's action values, over every control step of every
+    /// episode, that lie past the +-1 the skill clips them to
+    /// ([`kumi_policies::skill::values_past_limit`]): near 1 the skill acts as a relay.
+    #[serde(default)]
+    pub action_values_past_limit: f64,
 }
 
 impl Evaluation {
@@ -83,12 +89,13 @@ impl Evaluation {
     pub fn markdown(&self) -> String {
         let row = ErrorStats::markdown_row;
         format!(
-            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}",
+            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}\naction values past the +-1 they are clipped to: {:.1} %\n",
             self.rollouts,
             self.goals,
             self.engine,
             row("position [m]", &self.position_error_m),
             row("orientation [rad]", &self.orientation_error_rad),
+            100.0 * self.action_values_past_limit,
         )
     }
 }
@@ -116,7 +123,7 @@ where
 {
     let goals_per_episode = (config.episode_steps / config.goal_period_steps).max(1);
     let episodes = rollouts.div_ceil(goals_per_episode);
-    let per_episode: Vec<Vec<(f64, f64)>> = (0..episodes)
+    let per_episode: Vec<(Vec<(f64, f64)>, usize)> = (0..episodes)
         .into_par_iter()
         .map_init(
             || make_policy().map_err(EvalError::Policy),
@@ -128,19 +135,27 @@ where
                 let mut env = ArmReach::new(model.clone(), config.clone(), episode_seed)?;
                 let mut obs = env.reset();
                 let mut ends = Vec::with_capacity(goals_per_episode);
+                let mut past_limit = 0;
                 for _ in 0..config.episode_steps {
                     let action = policy(&obs).map_err(EvalError::Policy)?;
+                    past_limit += values_past_limit(&action);
                     let out = env.step(&action);
                     if out.goal_ended {
                         ends.push((out.position_error, out.orientation_error));
                     }
                     obs = out.observation;
                 }
-                Ok(ends)
+                Ok((ends, past_limit))
             },
         )
         .collect::<Result<_, EvalError>>()?;
-    let ends: Vec<(f64, f64)> = per_episode.into_iter().flatten().take(rollouts).collect();
+    let values = episodes * config.episode_steps * JOINTS;
+    let past_limit: usize = per_episode.iter().map(|(_, n)| n).sum();
+    let ends: Vec<(f64, f64)> = per_episode
+        .into_iter()
+        .flat_map(|(ends, _)| ends)
+        .take(rollouts)
+        .collect();
     let (p, o): (Vec<f64>, Vec<f64>) = ends.iter().copied().unzip();
     Ok(Evaluation {
         engine: config.engine.to_string(),
@@ -154,6 +169,7 @@ where
         rollouts: ends.len(),
         position_error_m: ErrorStats::of(&p),
         orientation_error_rad: ErrorStats::of(&o),
+        action_values_past_limit: past_limit as f64 / values.max(1) as f64,
     })
 }
 
@@ -183,6 +199,7 @@ mod tests {
             rollouts: 2,
             position_error_m: ErrorStats::of(&[0.1, 0.3]),
             orientation_error_rad: ErrorStats::of(&[0.5, 0.5]),
+            action_values_past_limit: 0.25,
         };
         let v: serde_json::Value = serde_json::to_value(&e).unwrap();
         assert_eq!(v["rollouts"], 2);
@@ -192,5 +209,7 @@ mod tests {
             assert!(v["orientation_error_rad"][key].is_number(), "{key}");
         }
         assert!(e.markdown().contains("| position [m] | 0.2000 | 0.1000 |"));
+        assert_eq!(v["action_values_past_limit"], 0.25);
+        assert!(e.markdown().contains("clipped to: 25.0 %"));
     }
 }

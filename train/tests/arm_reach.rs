@@ -230,3 +230,20 @@ fn working_starts_begin_at_a_module_home_with_the_first_goal_around_it() {
         assert!((e.goal().position_b - home).norm() < 1e-9);
     }
 }
+
+#[test]
+fn the_evaluation_counts_action_values_past_the_clip() {
+    use kumi_train::evaluate::evaluate;
+    // One episode (three goals); a relay of +-2 lies past the clip in every value, a policy
+    // of +-0.5 in none, and one of (2, 0.5, 0.5, ...) in one value of seven.
+    let share = |action: [f32; 7]| {
+        evaluate(model("arm"), ArmReachConfig::default(), 3, 1, || {
+            Ok(move |_: &_| Ok::<_, String>(action))
+        })
+        .unwrap()
+        .action_values_past_limit
+    };
+    assert_eq!(share([2.0, -2.0, 2.0, -2.0, 2.0, -2.0, 2.0]), 1.0);
+    assert_eq!(share([0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5]), 0.0);
+    assert!((share([2.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]) - 1.0 / 7.0).abs() < 1e-12);
+}
