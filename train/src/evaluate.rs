@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use kumi_model::RobotModel;
 use kumi_policies::observation::{JOINTS, OBSERVATION_DIM};
-use kumi_policies::skill::values_past_limit;
+use kumi_policies::skill::{values_past_limit, ACTION_LIMIT};
 use rayon::prelude::*;
 
 use crate::arm_reach::{ArmReach, ArmReachConfig, EnvError};
@@ -78,8 +78,8 @@ pub struct Evaluation {
     pub position_error_m: ErrorStats,
     pub orientation_error_rad: ErrorStats,
     /// The share (0-1) of the policy's action values, over every control step of every
-    /// episode, that lie past the +-1 the skill clips them to
-    /// ([`kumi_policies::skill::values_past_limit`]): near 1 the skill acts as a relay.
+    /// episode, that lie past the +-[`ACTION_LIMIT`] the skill clips them to
+    /// ([`values_past_limit`]): near 1 the skill acts as a relay.
     #[serde(default)]
     pub action_values_past_limit: f64,
 }
@@ -89,7 +89,7 @@ impl Evaluation {
     pub fn markdown(&self) -> String {
         let row = ErrorStats::markdown_row;
         format!(
-            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}\naction values past the +-1 they are clipped to: {:.1} %\n",
+            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}\naction values past the +-{ACTION_LIMIT} they are clipped to: {:.1} %\n",
             self.rollouts,
             self.goals,
             self.engine,
