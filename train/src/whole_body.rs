@@ -679,6 +679,9 @@ impl WholeBody {
         self.push_if_due();
         self.world.step();
         self.step += 1;
+        if self.world.diverged() {
+            return self.diverged_step(action);
+        }
 
         let (position_error, yaw_error) = self.errors();
         let arm_velocities = self.arm_values(&self.world.joint_velocities());
@@ -719,8 +722,8 @@ impl WholeBody {
                 self.world.wheel_modules_off_ground(),
             );
         }
-        let terminated = self.world.diverged() || fell;
-        if self.replay.is_some() && !self.world.diverged() {
+        let terminated = fell;
+        if self.replay.is_some() {
             let (moment, tilt_rad) = (self.moment(), tilt(&self.world.base_pose().rotation));
             if let Some(replay) = self.replay.as_mut() {
                 replay.record(moment, tilt_rad);
@@ -740,6 +743,29 @@ impl WholeBody {
 }
 
 impl WholeBody {
+    /// A step after which the physics had blown up ([`SimWorld::diverged`]): its state means
+    /// nothing, so nothing is scored from it (a rapier world that blew up once gave a training
+    /// batch rewards summing to -3.6e20 through the joint-speed penalty). It ends the episode
+    /// as a fall does, earning the fall penalty alone; its errors are NaN, and its observation
+    /// zeros (the trainer resets before reading one).
+    fn diverged_step(&mut self, action: &[f32]) -> BodyStep {
+        self.previous_action.copy_from_slice(action);
+        let terms = BodyTerms {
+            fall: fall_penalty(self.config.weights.fall, true),
+            ..BodyTerms::default()
+        };
+        BodyStep {
+            observation: vec![0.0; self.observation_dim()],
+            reward: terms.total(),
+            terms,
+            terminated: true,
+            truncated: self.step >= self.episode_steps,
+            position_error: f64::NAN,
+            yaw_error: f64::NAN,
+            replayed: self.replayed,
+        }
+    }
+
     /// The penalty baseline's terms (Eqs. 5 and 6), when their weights are set.
     fn add_penalties(&self, terms: &mut BodyTerms) {
         let p = self.config.penalty;

@@ -1003,3 +1003,42 @@ fn training_noise_moves_only_the_noised_slots_and_never_the_episode() {
     };
     assert!(e.to_string().contains("`tool_to_targets`"), "{e}");
 }
+
+#[test]
+fn a_step_whose_physics_blew_up_ends_the_episode_with_the_fall_penalty_alone() {
+    // A rapier world that blew up once gave a training batch rewards summing to -3.6e20 through
+    // the joint-speed penalty (stop 52). Now either engine flags the blow-up, and the
+    // environment scores nothing from the lost state.
+    let mut c = config(1.5);
+    c.weights.fall = 20.0;
+    c.weights.alive = 0.5;
+    for engine in kumi_worlds::available_engines() {
+        c.engine = engine;
+        let mut env = WholeBody::new(model("tricycle"), c.clone(), &skill(), 6).unwrap();
+        let dim = env.observation_dim();
+        env.reset();
+        let zero = vec![0.0; env.terms().size()];
+        let sound = env.step(&zero);
+        assert!(!env.world().diverged() && !sound.terminated, "{engine}");
+        let absurd = Vector3::new(1e15, -1e15, 1e15);
+        env.world_mut().push(&absurd, &absurd);
+        let lost = env.step(&zero);
+        assert!(
+            env.world().diverged(),
+            "{engine}: an absurd shove did not blow up"
+        );
+        assert!(lost.terminated, "{engine}: the episode went on");
+        assert_eq!(lost.reward, -20.0, "{engine}: {:?}", lost.terms);
+        assert_eq!(lost.observation, vec![0.0; dim], "{engine}");
+        assert!(
+            lost.position_error.is_nan() && lost.yaw_error.is_nan(),
+            "{engine}"
+        );
+        env.reset();
+        assert!(
+            !env.world().diverged(),
+            "{engine}: a reset left it diverged"
+        );
+        assert!(!env.step(&zero).terminated, "{engine}");
+    }
+}

@@ -9,6 +9,7 @@
 
 mod actuator;
 mod config;
+mod divergence;
 mod engine;
 mod error;
 mod groups;
@@ -17,6 +18,7 @@ mod world;
 
 pub use actuator::{integrate_velocity_setpoint, max_lead, slew, ServoState};
 pub use config::SimConfig;
+pub use divergence::{blown_up, BLOWN_UP_RATE_RAD_S, BLOWN_UP_SPEED_M_S};
 pub use engine::Engine;
 pub use error::SimError;
 pub use groups::{contact_groups, mount_is_impulse};

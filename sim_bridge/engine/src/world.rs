@@ -138,12 +138,23 @@ pub trait SimWorld: Send {
     /// The world pose of every URDF link frame, in URDF link order.
     fn body_poses(&self) -> Vec<(String, Isometry3<f64>)>;
 
-    /// Whether the physics blew up since the last reset (MuJoCo detects non-finite or huge
-    /// positions, velocities or accelerations and restarts itself from its initial state when
-    /// they happen; rapier never reports it). A diverged world's state means nothing until the
-    /// next reset.
-    fn diverged(&self) -> bool {
-        false
+    /// Whether the physics blew up since the last reset (a restored snapshot brings back its
+    /// world's answer): after a control step ended in a state past [`crate::blown_up`]'s
+    /// bounds, in either engine, or, in MuJoCo, after MuJoCo found non-finite or huge
+    /// positions, velocities or accelerations and restarted itself from its initial state. A
+    /// diverged world's state means nothing until the next reset.
+    fn diverged(&self) -> bool;
+
+    /// Whether the state now is past [`crate::blown_up`]'s bounds: what each engine checks
+    /// after every control step to set [`SimWorld::diverged`].
+    fn state_blown_up(&self) -> bool {
+        let (linear, angular) = self.base_twist_w();
+        crate::blown_up(
+            &self.joint_velocities(),
+            &self.base_pose().translation.vector,
+            &linear,
+            &angular,
+        )
     }
 
     /// Actuated joint names, in the order of every per-joint vector of this API.

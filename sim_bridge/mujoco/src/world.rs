@@ -68,7 +68,8 @@ pub struct MujocoWorld {
     servos: ServoBank,
     base_link: usize,
     time_s: f64,
-    /// MuJoCo reported a bad acceleration (and reset itself) since the last reset.
+    /// MuJoCo reported a blow-up (and reset itself), or a control step ended past
+    /// [`kumi_engine::blown_up`]'s bounds, since the last reset.
     diverged: bool,
 }
 
@@ -332,6 +333,7 @@ impl SimWorld for MujocoWorld {
         self.data.kinematics();
         self.data.com_pos();
         self.time_s += 1.0 / self.config.control_hz;
+        self.diverged = self.diverged || self.state_blown_up();
     }
 
     fn push(&mut self, delta_v_w: &Vector3<f64>, delta_w_w: &Vector3<f64>) {

@@ -16,7 +16,7 @@ use kumi_ros::{qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_worlds::{Engine, SimConfig, SimError, SimWorld};
 use nalgebra::Vector3;
 use ros2_client::Publisher;
-use tracing::{info, warn};
+use tracing::{error, info, warn};
 
 use crate::commands::{Commands, Rejection, Update};
 use crate::lockstep::Lockstep;
@@ -101,6 +101,8 @@ struct Counters {
     late_steps: u64,
     /// Real time: the latest any step began after its tick [s].
     max_step_late_s: f64,
+    /// The sim time [s] of the step after which the physics blew up ([`SimWorld::diverged`]).
+    diverged_at_s: Option<f64>,
 }
 
 /// The ROS side of the bridge: publishers, subscriptions.
@@ -541,6 +543,11 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             }
             world.step();
             steps += 1;
+            if world.diverged() && counters.diverged_at_s.is_none() {
+                let at_s = steps as f64 * control_dt;
+                error!("the physics blew up at {at_s:.3} s of sim time: the simulated robot means nothing until the bridge restarts");
+                counters.diverged_at_s = Some(at_s);
+            }
             let linvel = world.base_twist_w().0;
             accel_w = (linvel - last_linvel) / control_dt;
             last_linvel = linvel;
@@ -672,6 +679,13 @@ fn diagnostics(
                 .collect::<Vec<_>>()
                 .join(","),
         },
+        KeyValue {
+            key: "physics_diverged_at_s".into(),
+            value: counters
+                .diverged_at_s
+                .map(|t| format!("{t:.3}"))
+                .unwrap_or_default(),
+        },
     ];
     for kind in [
         "non_finite",
@@ -686,7 +700,9 @@ fn diagnostics(
             value: counters.by_kind.get(kind).copied().unwrap_or(0).to_string(),
         });
     }
-    let level = if rejected > 0 {
+    let level = if counters.diverged_at_s.is_some() {
+        DiagnosticStatus::ERROR
+    } else if rejected > 0 {
         DiagnosticStatus::WARN
     } else {
         DiagnosticStatus::OK
@@ -699,7 +715,9 @@ fn diagnostics(
         status: vec![DiagnosticStatus {
             level,
             name: format!("kumi sim bridge: {}", config.robot),
-            message: if rejected > 0 {
+            message: if let Some(t) = counters.diverged_at_s {
+                format!("the physics blew up at {t:.3} s: restart the bridge")
+            } else if rejected > 0 {
                 format!("{rejected} commands rejected")
             } else {
                 "ok".into()
@@ -707,5 +725,61 @@ fn diagnostics(
             hardware_id: config.robot.clone(),
             values,
         }],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kumi_model::{assemble, load_morphology, ModuleLibrary};
+
+    fn config() -> BridgeConfig {
+        let library = ModuleLibrary::shipped();
+        let morphology = load_morphology("minimal", &library).unwrap();
+        BridgeConfig {
+            model: Arc::new(assemble(&morphology, &library)),
+            engine: Engine::Rapier,
+            robot: "minimal".into(),
+            domain_id: 0,
+            mode: Mode::RealTime { factor: 1.0 },
+            stale_after_s: 0.5,
+            duplicate_check: Duration::ZERO,
+        }
+    }
+
+    fn status(counters: &Counters, malformed: u64) -> DiagnosticStatus {
+        diagnostics(
+            &config(),
+            90,
+            1.0 / 30.0,
+            1.0,
+            counters,
+            malformed,
+            Instant::now(),
+        )
+        .status
+        .remove(0)
+    }
+
+    fn value<'a>(status: &'a DiagnosticStatus, key: &str) -> &'a str {
+        let found = status.values.iter().find(|v| v.key == key);
+        &found.unwrap_or_else(|| panic!("no {key}")).value
+    }
+
+    #[test]
+    fn a_blow_up_is_an_error_above_any_rejection() {
+        let mut counters = Counters::default();
+        assert_eq!(status(&counters, 0).level, DiagnosticStatus::OK);
+        assert_eq!(value(&status(&counters, 0), "physics_diverged_at_s"), "");
+        assert_eq!(status(&counters, 2).level, DiagnosticStatus::WARN);
+        counters.diverged_at_s = Some(2.5);
+        let lost = status(&counters, 2);
+        assert_eq!(lost.level, DiagnosticStatus::ERROR);
+        assert_eq!(value(&lost, "physics_diverged_at_s"), "2.500");
+        assert!(
+            lost.message.contains("blew up at 2.500 s"),
+            "{}",
+            lost.message
+        );
     }
 }

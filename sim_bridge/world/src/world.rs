@@ -31,6 +31,8 @@ struct RapierState {
     ccd_solver: CCDSolver,
     servos: Vec<ServoState>,
     time_s: f64,
+    /// Whether the physics had blown up when it was taken.
+    diverged: bool,
 }
 
 impl RapierState {
@@ -40,6 +42,7 @@ impl RapierState {
         physics: &PhysicsWorld,
         servos: &[ServoState],
         time_s: f64,
+        diverged: bool,
     ) -> Self {
         Self {
             model: Arc::clone(model),
@@ -54,6 +57,7 @@ impl RapierState {
             ccd_solver: physics.ccd_solver.clone(),
             servos: servos.to_vec(),
             time_s,
+            diverged,
         }
     }
 }
@@ -75,6 +79,8 @@ pub struct World {
     /// reset world and a freshly built one follow bit-identical trajectories.
     pristine: RapierState,
     time_s: f64,
+    /// The state passed [`kumi_engine::blown_up`]'s bounds since the last reset.
+    diverged: bool,
 }
 
 impl World {
@@ -103,7 +109,7 @@ impl World {
             .link_index(&model.base_link)
             .expect("the base link is in the URDF");
         let servos = ServoBank::new(&model);
-        let pristine = RapierState::capture(&model, config, &physics, servos.states(), 0.0);
+        let pristine = RapierState::capture(&model, config, &physics, servos.states(), 0.0, false);
         let mut world = Self {
             model,
             config,
@@ -118,6 +124,7 @@ impl World {
             base_link,
             pristine,
             time_s: 0.0,
+            diverged: false,
         };
         let home = world.home_state();
         world.reset(&home);
@@ -144,6 +151,7 @@ impl World {
         self.physics.ccd_solver = s.ccd_solver;
         self.servos.restore(&s.servos);
         self.time_s = s.time_s;
+        self.diverged = s.diverged;
     }
 }
 
@@ -241,6 +249,7 @@ impl SimWorld for World {
             &self.physics,
             self.servos.states(),
             self.time_s,
+            self.diverged,
         ))
     }
 
@@ -253,10 +262,17 @@ impl SimWorld for World {
         Ok(())
     }
 
-    /// Advances one control step (`substeps` physics steps).
+    /// Advances one control step (`substeps` physics steps), or stops where the state blew up
+    /// ([`SimWorld::diverged`]): the physics then stands still until the next reset or restore.
     fn step(&mut self) {
         let dt = self.config.dt();
         for _ in 0..self.config.substeps {
+            // A blown-up state soon holds non-finite values, on which rapier's joint motors
+            // panic: a world that blew up is not stepped again until a reset or restore.
+            self.diverged = self.diverged || self.state_blown_up();
+            if self.diverged {
+                break;
+            }
             for (i, joint) in self.joints.iter().enumerate() {
                 let (mb, link_id) = self
                     .physics
@@ -279,6 +295,11 @@ impl SimWorld for World {
             self.physics.step();
         }
         self.time_s += 1.0 / self.config.control_hz;
+        self.diverged = self.diverged || self.state_blown_up();
+    }
+
+    fn diverged(&self) -> bool {
+        self.diverged
     }
 
     /// Adds the push to the free root of every multibody (each module's tree, mounts being
