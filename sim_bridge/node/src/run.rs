@@ -440,7 +440,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     let mut discovered_at = Instant::now() - Duration::from_secs(1);
 
     let publish_state = |world: &dyn SimWorld, steps: u64, accel_w: &Vector3<f64>| {
-        let stamp = Time::from_seconds(steps as f64 * control_dt);
+        let stamp = Time::from_seconds(sim_time_s(steps, control_dt));
         let robot = &config.robot;
         for (module, publisher) in &io.joint_states {
             if let Some(js) = state::joint_state(world, module, stamp) {
@@ -461,7 +461,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     publish_state(world.as_ref(), steps, &accel_w);
 
     while !shutdown.load(Ordering::Relaxed) {
-        let now_s = steps as f64 * control_dt;
+        let now_s = sim_time_s(steps, control_dt);
         // Commands.
         for inputs in &io.inputs {
             for message in drain(inputs, &mut malformed, &mut malformed_log) {
@@ -544,7 +544,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             world.step();
             steps += 1;
             if world.diverged() && counters.diverged_at_s.is_none() {
-                let at_s = steps as f64 * control_dt;
+                let at_s = sim_time_s(steps, control_dt);
                 error!("the physics blew up at {at_s:.3} s of sim time: the simulated robot means nothing until the bridge restarts");
                 counters.diverged_at_s = Some(at_s);
             }
@@ -598,6 +598,12 @@ fn module_of(update: &Update) -> &str {
     }
 }
 
+/// The bridge's sim time [s] after `steps` control steps of `control_dt` [s]: the clock it
+/// publishes, the stamp of every message and what it reports.
+fn sim_time_s(steps: u64, control_dt: f64) -> f64 {
+    steps as f64 * control_dt
+}
+
 fn log_rejection(limiter: &mut RateLimited, rejection: &Rejection) {
     if let Some(suppressed) = limiter.check(Instant::now()) {
         if suppressed > 0 {
@@ -632,7 +638,7 @@ fn diagnostics(
         },
         KeyValue {
             key: "sim_time_s".into(),
-            value: format!("{:.3}", steps as f64 * control_dt),
+            value: format!("{:.3}", sim_time_s(steps, control_dt)),
         },
         KeyValue {
             key: "wall_time_s".into(),
@@ -709,7 +715,7 @@ fn diagnostics(
     };
     DiagnosticArray {
         header: Header {
-            stamp: Time::from_seconds(steps as f64 * control_dt),
+            stamp: Time::from_seconds(sim_time_s(steps, control_dt)),
             frame_id: String::new(),
         },
         status: vec![DiagnosticStatus {
