@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use kumi_policies::goals::GoalDistribution;
 use kumi_policies::skill::ArmSkill;
-use kumi_runtime::{BackendChoice, SkillPolicy, WholeBodyPolicy};
+use kumi_runtime::{BackendChoice, RuntimeError, SkillPolicy, WholeBodyPolicy};
 use kumi_train::arm_reach::ArmReachConfig;
 use kumi_train::evaluate::evaluate;
 use kumi_train::evaluate_body::{Episode, Protocol, TraceStep};
@@ -61,8 +61,8 @@ pub struct EvalBodyArgs {
     #[arg(long)]
     pub json: bool,
     /// Also write every episode to this CSV: its start, closest and final tool errors, yaw
-    /// error, leg orientation, contact steps, length and whether it fell (a column names the
-    /// engine).
+    /// error, leg orientation, contact steps, length, whether it fell and whether its physics
+    /// blew up (a column names the engine).
     #[arg(long)]
     pub episodes: Option<PathBuf>,
     /// Also write every control step of the first `--traced` episodes to this CSV: base pose,
@@ -210,6 +210,34 @@ impl BodyEvaluations {
     }
 }
 
+/// Why the policy at `path` did not load, with a hint only where the config can be the cause:
+/// a contract mismatch on a key the config decides (its observation or action terms). A file
+/// that is not a policy, another robot's or skill's policy, or a backend that fails to load (no
+/// ONNX Runtime library, say) is named as what it is.
+fn policy_load_error(
+    e: RuntimeError,
+    args: &EvalBodyArgs,
+    path: &std::path::Path,
+    robot: &str,
+) -> anyhow::Error {
+    let from_config =
+        matches!(&e, RuntimeError::Contract { mismatch, .. } if mismatch.from_config());
+    let e = anyhow::Error::new(e);
+    match (&args.config, from_config) {
+        (_, false) => e.context("loading the policy"), // the error names the file
+        (Some(config), true) => e.context(format!(
+            "checking {} against {}",
+            path.display(),
+            config.display()
+        )),
+        (None, true) => e.context(format!(
+            "checking {} against the shipped {} config for {robot}: a policy trained with another config needs it passed with --config",
+            path.display(),
+            args.variant,
+        )),
+    }
+}
+
 /// Evaluates the policy `args` names in each of its engines.
 pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
     anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
@@ -234,17 +262,8 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
     let control_hz = kumi_worlds::SimConfig::for_model(&model).control_hz;
     let expected =
         kumi_terms::contract::contract(&model, &terms, file.observation, &skill, control_hz);
-    let probe = WholeBodyPolicy::load(&path, &expected, args.backend).with_context(|| {
-        match &args.config {
-            Some(config) => format!("checking {} against {}", path.display(), config.display()),
-            None => format!(
-                "checking {} against the shipped {} config for {}: a policy trained with another config needs it passed with --config",
-                path.display(),
-                args.variant,
-                model.name
-            ),
-        }
-    })?;
+    let probe = WholeBodyPolicy::load(&path, &expected, args.backend)
+        .map_err(|e| policy_load_error(e, args, &path, &model.name))?;
     let backend = probe.backend();
     let steps = probe
         .metadata()

@@ -377,6 +377,9 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         rows[0][..3],
         ["engine", "episode", "start_position_error_m"]
     );
+    assert_eq!(rows[0][9..], ["fell", "diverged"]);
+    assert!(rows.iter().all(|r| r.len() == rows[0].len()), "{episodes}");
+    assert!(rows[1..].iter().all(|r| r[10] == "0"), "{episodes}");
     let steps: usize = rows[1][8].parse().unwrap();
     let trace = std::fs::read_to_string(trace).unwrap();
     let lines: Vec<&str> = trace.lines().collect();
@@ -423,6 +426,7 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         );
     }
     assert!(v["terminations"].as_u64().unwrap() <= 2);
+    assert_eq!(v["diverged"], 0);
     // A policy for Minimal does not run Dragon: the error names the key and both values.
     let wrong = kumi(&[
         "eval",
@@ -439,6 +443,8 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         err.contains("kumi.morphology") && err.contains("`minimal`") && err.contains("`dragon`"),
         "{err}"
     );
+    // Another robot's policy is no matter of the config: no hint at --config.
+    assert!(!err.contains("another config"), "{err}");
     std::fs::remove_dir_all(&out_dir).unwrap();
 }
 
@@ -601,6 +607,28 @@ fn eval_arm_refuses_a_file_that_is_not_a_policy() {
 }
 
 #[test]
+fn eval_whole_body_names_a_missing_onnx_runtime_as_such_not_as_a_config_mismatch() {
+    let out = Command::new(env!("CARGO_BIN_EXE_kumi"))
+        .args(["eval", "whole-body", "minimal", "--rollouts", "1"])
+        .args(["--backend", "onnxruntime"])
+        .env("ORT_DYLIB_PATH", "/nonexistent/libonnxruntime.so")
+        .output()
+        .expect("kumi runs");
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("ORT_DYLIB_PATH=/nonexistent/libonnxruntime.so: no such file"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("loading the policy: ")
+            && stderr.contains("minimal_whole_body.onnx: onnxruntime cannot load the model"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("--config"), "{stderr}");
+}
+
+#[test]
 fn arm_node_names_the_modules_it_could_drive() {
     let out = kumi(&["arm", "leg9", "--robot", "tricycle"]);
     assert!(!out.status.success());
@@ -736,6 +764,7 @@ mod mujoco {
             stderr.contains("kumi.action") && stderr.contains("lateral_acceleration_m_s2=0.07"),
             "{stderr}"
         );
+        assert!(stderr.contains("tricycle.toml: "), "{stderr}");
     }
 
     #[test]

@@ -153,6 +153,9 @@ pub struct StepOutcome {
     pub terms: ReachTerms,
     /// The episode reached its step limit (a time-out: bootstrap the value).
     pub truncated: bool,
+    /// The physics blew up ([`SimWorld::diverged`]): the episode ends here, scoring nothing,
+    /// its errors NaN and its observation zeros; reset before stepping again.
+    pub terminated: bool,
     /// A goal period ended at this step: the errors below are the paper's final errors.
     pub goal_ended: bool,
     /// Tool position error [m] to the (noise-free) goal after this step.
@@ -338,6 +341,9 @@ impl ArmReach {
 
     /// Applies one action (7 values in [-1, 1], clipped), steps the physics one control step.
     pub fn step(&mut self, act: &[f32; JOINTS]) -> StepOutcome {
+        if self.world.diverged() {
+            return self.diverged_step();
+        }
         let increments = self.skill.increments(act);
         let actuators: Vec<&Actuator> = self.actuators.iter().collect();
         self.targets = apply_increments(&self.targets, &increments, &actuators)
@@ -347,6 +353,9 @@ impl ArmReach {
             .expect("targets are finite and the module is an arm");
         self.world.step();
         self.step += 1;
+        if self.world.diverged() {
+            return self.diverged_step();
+        }
 
         let (position_error, orientation_error) = self.errors();
         let (q, qd) = self.joints();
@@ -370,9 +379,32 @@ impl ArmReach {
             reward: terms.total(),
             terms,
             truncated: self.step >= self.config.episode_steps,
+            terminated: false,
             goal_ended,
             position_error,
             orientation_error,
         }
+    }
+
+    /// A step in a world whose physics blew up: its state means nothing, so nothing is scored
+    /// from it. Unlike the whole-body task there is no fall penalty: a step's reward here is
+    /// mostly positive, so ending early does not pay.
+    fn diverged_step(&self) -> StepOutcome {
+        StepOutcome {
+            observation: [0.0; OBSERVATION_DIM],
+            reward: 0.0,
+            terms: ReachTerms::default(),
+            truncated: self.step >= self.config.episode_steps,
+            terminated: true,
+            goal_ended: false,
+            position_error: f64::NAN,
+            orientation_error: f64::NAN,
+        }
+    }
+
+    /// The simulated world, to set up a test's state (a training or evaluation loop only
+    /// steps the environment).
+    pub fn world_mut(&mut self) -> &mut dyn SimWorld {
+        self.world.as_mut()
     }
 }

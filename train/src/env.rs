@@ -73,7 +73,7 @@ impl Environment for crate::arm_reach::ArmReach {
         Transition {
             observation: o.observation.to_vec(),
             reward: o.reward,
-            terminated: false,
+            terminated: o.terminated,
             truncated: o.truncated,
             metrics: if o.goal_ended {
                 vec![

@@ -82,6 +82,10 @@ pub struct Evaluation {
     /// ([`values_past_limit`]): near 1 the skill acts as a relay.
     #[serde(default)]
     pub action_values_past_limit: f64,
+    /// Episodes cut short because their physics blew up ([`kumi_worlds::SimWorld::diverged`]):
+    /// the goals they did not finish are not among the rollouts.
+    #[serde(default)]
+    pub diverged_episodes: usize,
 }
 
 impl Evaluation {
@@ -89,13 +93,17 @@ impl Evaluation {
     pub fn markdown(&self) -> String {
         let row = ErrorStats::markdown_row;
         format!(
-            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}\naction values past the +-{ACTION_LIMIT} they are clipped to: {:.1} %\n",
+            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}\naction values past the +-{ACTION_LIMIT} they are clipped to: {:.1} %\n{}",
             self.rollouts,
             self.goals,
             self.engine,
             row("position [m]", &self.position_error_m),
             row("orientation [rad]", &self.orientation_error_rad),
             100.0 * self.action_values_past_limit,
+            match self.diverged_episodes {
+                0 => String::new(),
+                n => format!("episodes cut short by physics that blew up: {n}\n"),
+            },
         )
     }
 }
@@ -123,7 +131,7 @@ where
 {
     let goals_per_episode = (config.episode_steps / config.goal_period_steps).max(1);
     let episodes = rollouts.div_ceil(goals_per_episode);
-    let per_episode: Vec<(Vec<(f64, f64)>, usize)> = (0..episodes)
+    let per_episode: Vec<EpisodeOutcome> = (0..episodes)
         .into_par_iter()
         .map_init(
             || make_policy().map_err(EvalError::Policy),
@@ -133,27 +141,17 @@ where
                     .map_err(|e| EvalError::Policy(e.to_string()))?;
                 let episode_seed = seed.wrapping_mul(1_000_003).wrapping_add(k as u64);
                 let mut env = ArmReach::new(model.clone(), config.clone(), episode_seed)?;
-                let mut obs = env.reset();
-                let mut ends = Vec::with_capacity(goals_per_episode);
-                let mut past_limit = 0;
-                for _ in 0..config.episode_steps {
-                    let action = policy(&obs).map_err(EvalError::Policy)?;
-                    past_limit += values_past_limit(&action);
-                    let out = env.step(&action);
-                    if out.goal_ended {
-                        ends.push((out.position_error, out.orientation_error));
-                    }
-                    obs = out.observation;
-                }
-                Ok((ends, past_limit))
+                let obs = env.reset();
+                run_episode(&mut env, obs, config.episode_steps, policy)
             },
         )
         .collect::<Result<_, EvalError>>()?;
-    let values = episodes * config.episode_steps * JOINTS;
-    let past_limit: usize = per_episode.iter().map(|(_, n)| n).sum();
+    let values: usize = per_episode.iter().map(|e| e.action_values).sum();
+    let past_limit: usize = per_episode.iter().map(|e| e.action_values_past_limit).sum();
+    let diverged_episodes = per_episode.iter().filter(|e| e.diverged).count();
     let ends: Vec<(f64, f64)> = per_episode
         .into_iter()
-        .flat_map(|(ends, _)| ends)
+        .flat_map(|e| e.ends)
         .take(rollouts)
         .collect();
     let (p, o): (Vec<f64>, Vec<f64>) = ends.iter().copied().unzip();
@@ -170,7 +168,57 @@ where
         position_error_m: ErrorStats::of(&p),
         orientation_error_rad: ErrorStats::of(&o),
         action_values_past_limit: past_limit as f64 / values.max(1) as f64,
+        diverged_episodes,
     })
+}
+
+/// What one evaluation episode gave.
+#[derive(Debug, PartialEq)]
+pub struct EpisodeOutcome {
+    /// Position [m] and orientation [rad] errors at each goal's end.
+    pub ends: Vec<(f64, f64)>,
+    /// The policy's action values past the +-[`ACTION_LIMIT`] they are clipped to.
+    pub action_values_past_limit: usize,
+    /// Every action value the policy gave.
+    pub action_values: usize,
+    /// Cut short because its physics blew up.
+    pub diverged: bool,
+}
+
+/// Runs `env` from `obs` (its reset's) for up to `steps` control steps under `policy`, or until
+/// its physics blows up.
+pub fn run_episode<P>(
+    env: &mut ArmReach,
+    mut obs: [f32; OBSERVATION_DIM],
+    steps: usize,
+    policy: &mut P,
+) -> Result<EpisodeOutcome, EvalError>
+where
+    P: FnMut(&[f32; OBSERVATION_DIM]) -> Result<[f32; JOINTS], String>,
+{
+    let mut outcome = EpisodeOutcome {
+        ends: Vec::new(),
+        action_values_past_limit: 0,
+        action_values: 0,
+        diverged: false,
+    };
+    for _ in 0..steps {
+        let action = policy(&obs).map_err(EvalError::Policy)?;
+        outcome.action_values_past_limit += values_past_limit(&action);
+        outcome.action_values += JOINTS;
+        let out = env.step(&action);
+        if out.terminated {
+            outcome.diverged = true;
+            break;
+        }
+        if out.goal_ended {
+            outcome
+                .ends
+                .push((out.position_error, out.orientation_error));
+        }
+        obs = out.observation;
+    }
+    Ok(outcome)
 }
 
 #[cfg(test)]
@@ -200,6 +248,7 @@ mod tests {
             position_error_m: ErrorStats::of(&[0.1, 0.3]),
             orientation_error_rad: ErrorStats::of(&[0.5, 0.5]),
             action_values_past_limit: 0.25,
+            diverged_episodes: 0,
         };
         let v: serde_json::Value = serde_json::to_value(&e).unwrap();
         assert_eq!(v["rollouts"], 2);
@@ -211,5 +260,14 @@ mod tests {
         assert!(e.markdown().contains("| position [m] | 0.2000 | 0.1000 |"));
         assert_eq!(v["action_values_past_limit"], 0.25);
         assert!(e.markdown().contains("clipped to: 25.0 %"));
+        assert!(!e.markdown().contains("blew up"));
+        let cut = Evaluation {
+            diverged_episodes: 2,
+            ..e
+        };
+        assert!(cut
+            .markdown()
+            .ends_with("episodes cut short by physics that blew up: 2\n"));
+        assert_eq!(serde_json::to_value(&cut).unwrap()["diverged_episodes"], 2);
     }
 }

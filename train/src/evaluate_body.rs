@@ -35,6 +35,10 @@ pub struct BodyEvaluation {
     pub contacts_per_episode: ErrorStats,
     /// Episodes that ended by a fall (base tilt past the limit) or diverged physics.
     pub terminations: usize,
+    /// Of the terminations, those whose physics blew up ([`SimWorld::diverged`]): their final
+    /// errors and leg orientation are NaN in the episodes' CSV.
+    #[serde(default)]
+    pub diverged: usize,
     /// Standard deviation of the Gaussian noise added to every action [policy units]; 0: the
     /// deterministic policy.
     #[serde(default)]
@@ -52,7 +56,7 @@ impl BodyEvaluation {
     pub fn markdown(&self) -> String {
         let row = ErrorStats::markdown_row;
         format!(
-            "| {} ({} rollouts, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}{}{}| terminations | {} of {} | | | |\n",
+            "| {} ({} rollouts, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}{}{}| terminations | {} of {}{} | | | |\n",
             self.robot,
             self.rollouts,
             self.engine,
@@ -67,6 +71,10 @@ impl BodyEvaluation {
             row("undesired contacts [steps/episode]", &self.contacts_per_episode),
             self.terminations,
             self.rollouts,
+            match self.diverged {
+                0 => String::new(),
+                n => format!(" ({n} of them physics that blew up)"),
+            },
         ) + &if self.action_noise > 0.0 {
             format!(
                 "\nWith Gaussian noise of std {} (policy units) on every action.\n",
@@ -248,6 +256,8 @@ pub struct Episode {
     pub contacts: usize,
     /// Ended by a fall or diverged physics.
     pub terminated: bool,
+    /// Ended because the physics blew up ([`SimWorld::diverged`]).
+    pub diverged: bool,
     /// Tool position error [m] at the start.
     pub start_position: f64,
     /// The smallest tool position error [m] over the episode.
@@ -262,12 +272,12 @@ pub struct Episode {
 
 impl Episode {
     /// The header of [`Episode::csv_row`].
-    pub const CSV_HEADER: &'static str = "episode,start_position_error_m,closest_position_error_m,final_position_error_m,final_yaw_error_rad,leg_orientation_rad,contact_steps,steps,fell";
+    pub const CSV_HEADER: &'static str = "episode,start_position_error_m,closest_position_error_m,final_position_error_m,final_yaw_error_rad,leg_orientation_rad,contact_steps,steps,fell,diverged";
 
     /// One CSV row, `k` the episode's index.
     pub fn csv_row(&self, k: usize) -> String {
         format!(
-            "{k},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{}",
+            "{k},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{}",
             self.start_position,
             self.closest_position,
             self.position,
@@ -275,7 +285,8 @@ impl Episode {
             self.leg,
             self.contacts,
             self.steps,
-            u8::from(self.terminated)
+            u8::from(self.terminated),
+            u8::from(self.diverged)
         )
     }
 }
@@ -370,16 +381,23 @@ where
                     if k < traced {
                         trace.push(TraceStep::of(env, &action));
                     }
-                    contacts += usize::from(rule.any(env.world()));
+                    // A world that blew up has no contacts or legs worth counting.
+                    let diverged = env.world().diverged();
+                    contacts += usize::from(!diverged && rule.any(env.world()));
                     closest = closest.min(out.position_error);
                     steps += 1;
                     if out.terminated || out.truncated {
                         return Ok(Episode {
                             position: out.position_error,
                             yaw: out.yaw_error,
-                            leg: leg_orientation(&model, env.world()),
+                            leg: if diverged {
+                                f64::NAN
+                            } else {
+                                leg_orientation(&model, env.world())
+                            },
                             contacts,
                             terminated: out.terminated,
+                            diverged,
                             start_position,
                             closest_position: closest,
                             steps,
@@ -410,6 +428,7 @@ where
         leg_orientation_rad: stats(&|e| e.leg, false),
         contacts_per_episode: stats(&|e| e.contacts as f64, true),
         terminations: episodes.len() - finished.len(),
+        diverged: episodes.iter().filter(|e| e.diverged).count(),
         action_noise,
         episodes,
         action_names: config
@@ -417,4 +436,40 @@ where
             .terms(&model)
             .map_or_else(|_| Vec::new(), |terms| terms.names()),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_markdown_and_json_say_how_many_terminations_blew_up() {
+        let stats = ErrorStats::of(&[0.1, 0.3]);
+        let e = BodyEvaluation {
+            robot: "tricycle".into(),
+            engine: "rapier".into(),
+            rollouts: 300,
+            position_error_m: stats,
+            yaw_error_rad: stats,
+            leg_orientation_rad: stats,
+            contacts_per_episode: stats,
+            terminations: 67,
+            diverged: 0,
+            action_noise: 0.0,
+            episodes: Vec::new(),
+            action_names: Vec::new(),
+        };
+        assert!(e
+            .markdown()
+            .contains("| terminations | 67 of 300 | | | |\n"));
+        let blown = BodyEvaluation { diverged: 1, ..e };
+        assert!(blown
+            .markdown()
+            .contains("| terminations | 67 of 300 (1 of them physics that blew up) | | | |\n"));
+        let v = serde_json::to_value(&blown).unwrap();
+        assert_eq!(
+            (v["terminations"].as_u64(), v["diverged"].as_u64()),
+            (Some(67), Some(1))
+        );
+    }
 }

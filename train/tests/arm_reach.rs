@@ -247,3 +247,71 @@ fn the_evaluation_counts_action_values_past_the_clip() {
     assert_eq!(share([0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5]), 0.0);
     assert!((share([2.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]) - 1.0 / 7.0).abs() < 1e-12);
 }
+
+#[test]
+fn a_step_whose_physics_blew_up_ends_the_episode_scoring_nothing() {
+    // As in the whole-body environment: a world that blew up ends the episode (training resets
+    // it, evaluation stops it) instead of feeding NaN to the skill and the reward.
+    for engine in kumi_worlds::available_engines() {
+        let config = ArmReachConfig {
+            engine,
+            ..ArmReachConfig::default()
+        };
+        let mut e = ArmReach::new(model("arm"), config, 3).unwrap();
+        e.reset();
+        let sound = e.step(&[0.0; 7]);
+        assert!(!sound.terminated && sound.reward > 0.0, "{engine}");
+        // Joints placed a thousand turns past their limits: the limits fling them back.
+        let wild = kumi_worlds::RobotState {
+            base_pose_w: nalgebra::Isometry3::identity(),
+            joint_positions: vec![6.0e3; 7],
+        };
+        e.world_mut().reset(&wild);
+        let lost = e.step(&[0.0; 7]);
+        assert!(e.world().diverged(), "{engine}: the world did not blow up");
+        assert!(lost.terminated && !lost.goal_ended, "{engine}");
+        assert_eq!(
+            (lost.reward, lost.observation),
+            (0.0, [0.0; 21]),
+            "{engine}"
+        );
+        assert!(
+            lost.position_error.is_nan() && lost.orientation_error.is_nan(),
+            "{engine}"
+        );
+        // Stepping on regardless scores nothing more and steps nothing.
+        let t_s = e.world().time();
+        assert!(e.step(&[1.0; 7]).terminated, "{engine}");
+        assert_eq!(e.world().time(), t_s, "{engine}: a lost world was stepped");
+        e.reset();
+        assert!(
+            !e.world().diverged() && !e.step(&[0.0; 7]).terminated,
+            "{engine}"
+        );
+    }
+}
+
+#[test]
+fn an_evaluation_episode_stops_where_its_physics_blew_up() {
+    use kumi_train::evaluate::run_episode;
+    let mut policy = |_: &[f32; 21]| Ok::<_, String>([2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let mut e = env(5);
+    let obs = e.reset();
+    let whole = run_episode(&mut e, obs, 360, &mut policy).unwrap();
+    assert_eq!((whole.ends.len(), whole.diverged), (3, false));
+    assert_eq!(
+        (whole.action_values, whole.action_values_past_limit),
+        (360 * 7, 360)
+    );
+    let obs = e.reset();
+    let goal = run_episode(&mut e, obs, 120, &mut policy).unwrap();
+    assert_eq!(goal.ends.len(), 1);
+    e.world_mut().reset(&kumi_worlds::RobotState {
+        base_pose_w: nalgebra::Isometry3::identity(),
+        joint_positions: vec![6.0e3; 7],
+    });
+    // The first step blows up: its action is counted, no goal ends, nothing NaN is kept.
+    let cut = run_episode(&mut e, obs, 360, &mut policy).unwrap();
+    assert!(cut.diverged);
+    assert_eq!((cut.ends.len(), cut.action_values), (0, 7));
+}

@@ -38,6 +38,16 @@ pub const CONTRACT_KEYS: [&str; 9] = [
     metadata::CONTROL_HZ,
 ];
 
+/// The keys a training config decides (its observation slots and its action terms' bounds):
+/// a policy that differs on one of them from the config it is checked against may have been
+/// trained with another config of the same robot.
+pub const CONFIG_KEYS: [&str; 4] = [
+    metadata::OBSERVATION_DIM_KEY,
+    metadata::ACTION_DIM_KEY,
+    metadata::OBSERVATION,
+    ACTION,
+];
+
 /// A policy that does not fit.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ContractMismatch {
@@ -51,6 +61,20 @@ pub enum ContractMismatch {
         found: String,
         expected: String,
     },
+}
+
+impl ContractMismatch {
+    /// The key that does not fit.
+    pub fn key(&self) -> &'static str {
+        match self {
+            Self::Missing { key } | Self::Differs { key, .. } => key,
+        }
+    }
+
+    /// Whether the key is one a training config decides ([`CONFIG_KEYS`]).
+    pub fn from_config(&self) -> bool {
+        CONFIG_KEYS.contains(&self.key())
+    }
 }
 
 /// A robot's fingerprint: its URDF and each module's name, role and home angles.

@@ -137,10 +137,14 @@ fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
         }
         other => panic!("{other:?}"),
     }
-    let other_skill = contract::contract(&tricycle, &terms, NONE, b"skill-b", 30.0);
-    let err = contract::check(&other_skill, &trained)
+    // Another robot or skill is no matter of the training config.
+    assert!(!contract::check(&other_robot, &trained)
         .unwrap_err()
-        .to_string();
+        .from_config());
+    let other_skill = contract::contract(&tricycle, &terms, NONE, b"skill-b", 30.0);
+    let mismatch = contract::check(&other_skill, &trained).unwrap_err();
+    assert!(!mismatch.from_config());
+    let err = mismatch.to_string();
     assert!(err.contains(contract::SKILL_FINGERPRINT), "{err}");
     // The same robot with other bounds: the action key differs.
     let wider = ActionTerms::new(
@@ -151,13 +155,15 @@ fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
         },
     )
     .unwrap();
-    let err = contract::check(
+    let mismatch = contract::check(
         &contract::contract(&tricycle, &wider, NONE, b"skill-a", 30.0),
         &trained,
     )
-    .unwrap_err()
-    .to_string();
-    assert!(err.contains(contract::ACTION), "{err}");
+    .unwrap_err();
+    assert_eq!(
+        (mismatch.key(), mismatch.from_config()),
+        (contract::ACTION, true)
+    );
     // The same robot and terms observing the base's angular velocity: the observation's size
     // differs first, and the description names the slot.
     let spinning = ObservationOptions {
@@ -166,7 +172,9 @@ fn a_policy_for_another_robot_or_skill_is_refused_by_key() {
     };
     let with = contract::contract(&tricycle, &terms, spinning, b"skill-a", 30.0);
     assert_eq!(with[kumi_policies::metadata::OBSERVATION_DIM_KEY], "40");
-    let err = contract::check(&with, &trained).unwrap_err().to_string();
+    let mismatch = contract::check(&with, &trained).unwrap_err();
+    assert!(mismatch.from_config());
+    let err = mismatch.to_string();
     assert!(
         err.contains(kumi_policies::metadata::OBSERVATION_DIM_KEY),
         "{err}"
