@@ -173,7 +173,7 @@ where
 }
 
 /// What one evaluation episode gave.
-#[derive(Debug, PartialEq)]
+#[derive(Debug, Default)]
 pub struct EpisodeOutcome {
     /// Position [m] and orientation [rad] errors at each goal's end.
     pub ends: Vec<(f64, f64)>,
@@ -196,12 +196,7 @@ pub fn run_episode<P>(
 where
     P: FnMut(&[f32; OBSERVATION_DIM]) -> Result<[f32; JOINTS], String>,
 {
-    let mut outcome = EpisodeOutcome {
-        ends: Vec::new(),
-        action_values_past_limit: 0,
-        action_values: 0,
-        diverged: false,
-    };
+    let mut outcome = EpisodeOutcome::default();
     for _ in 0..steps {
         let action = policy(&obs).map_err(EvalError::Policy)?;
         outcome.action_values_past_limit += values_past_limit(&action);

@@ -248,6 +248,15 @@ fn the_evaluation_counts_action_values_past_the_clip() {
     assert!((share([2.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]) - 1.0 / 7.0).abs() < 1e-12);
 }
 
+/// Places the arm's joints a thousand turns past their limits: the limits fling them back, and
+/// the next step blows the physics up.
+fn set_up_a_blow_up(e: &mut ArmReach) {
+    e.world_mut().reset(&kumi_worlds::RobotState {
+        base_pose_w: nalgebra::Isometry3::identity(),
+        joint_positions: vec![6.0e3; 7],
+    });
+}
+
 #[test]
 fn a_step_whose_physics_blew_up_ends_the_episode_scoring_nothing() {
     // As in the whole-body environment: a world that blew up ends the episode (training resets
@@ -261,12 +270,7 @@ fn a_step_whose_physics_blew_up_ends_the_episode_scoring_nothing() {
         e.reset();
         let sound = e.step(&[0.0; 7]);
         assert!(!sound.terminated && sound.reward > 0.0, "{engine}");
-        // Joints placed a thousand turns past their limits: the limits fling them back.
-        let wild = kumi_worlds::RobotState {
-            base_pose_w: nalgebra::Isometry3::identity(),
-            joint_positions: vec![6.0e3; 7],
-        };
-        e.world_mut().reset(&wild);
+        set_up_a_blow_up(&mut e);
         let lost = e.step(&[0.0; 7]);
         assert!(e.world().diverged(), "{engine}: the world did not blow up");
         assert!(lost.terminated && !lost.goal_ended, "{engine}");
@@ -306,10 +310,7 @@ fn an_evaluation_episode_stops_where_its_physics_blew_up() {
     let obs = e.reset();
     let goal = run_episode(&mut e, obs, 120, &mut policy).unwrap();
     assert_eq!(goal.ends.len(), 1);
-    e.world_mut().reset(&kumi_worlds::RobotState {
-        base_pose_w: nalgebra::Isometry3::identity(),
-        joint_positions: vec![6.0e3; 7],
-    });
+    set_up_a_blow_up(&mut e);
     // The first step blows up: its action is counted, no goal ends, nothing NaN is kept.
     let cut = run_episode(&mut e, obs, 360, &mut policy).unwrap();
     assert!(cut.diverged);
