@@ -462,7 +462,7 @@ fn table_vi(md: &mut String, entries: &[Entry], settings: &Settings) {
                         pm(&ev.yaw_error_rad),
                         pm(&ev.leg_orientation_rad),
                         pm(&ev.contacts_per_episode),
-                        format!("{} of {}", ev.terminations, ev.rollouts),
+                        terminations_cell(ev),
                     ]
                 }
                 None => std::array::from_fn(|_| "not shipped".to_string()),
@@ -482,9 +482,19 @@ fn table_vi(md: &mut String, entries: &[Entry], settings: &Settings) {
         }
         let _ = writeln!(
             md,
-            "\nThe paper reports terminations as mean ± std over seeds; kumi counts them in its {} episodes of one seed.\n",
+            "\nThe paper reports terminations as mean ± std over seeds; kumi counts them in its {} episodes of one seed, with the 95 % Wilson interval of the rate per 1000.\n",
             settings.rollouts
         );
+    }
+}
+
+/// Table VI's terminations: the count, and the 95 % Wilson interval of the rate per 1000, which
+/// says whether a count such as 8 of 1000 stands apart from the paper's 2.8.
+fn terminations_cell(ev: &BodyEvaluation) -> String {
+    let count = format!("{} of {}", ev.terminations, ev.rollouts);
+    match BodyEvaluation::terminations_per_1000_95(ev.terminations, ev.rollouts) {
+        Some([lo, hi]) => format!("{count} (95 %: {lo:.1}-{hi:.1} per 1000)"),
+        None => count,
     }
 }
 
@@ -659,11 +669,27 @@ mod tests {
                 contacts_per_episode: stats(|e| e.contacts as f64),
                 terminations: 0,
                 diverged: 0,
+                terminations_per_1000_95: BodyEvaluation::terminations_per_1000_95(
+                    0,
+                    positions.len(),
+                ),
                 action_noise: 0.0,
                 episodes,
                 action_names: Vec::new(),
             },
         }
+    }
+
+    #[test]
+    fn table_vi_gives_the_terminations_with_their_interval() {
+        let mut ev = fake("tricycle", Variant::Hierarchical, &[0.1, 0.2]).evaluation;
+        (ev.terminations, ev.rollouts) = (8, 1000);
+        assert_eq!(
+            terminations_cell(&ev),
+            "8 of 1000 (95 %: 4.1-15.7 per 1000)"
+        );
+        ev.rollouts = 0;
+        assert_eq!(terminations_cell(&ev), "8 of 0");
     }
 
     #[test]

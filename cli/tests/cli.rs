@@ -427,6 +427,14 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
     }
     assert!(v["terminations"].as_u64().unwrap() <= 2);
     assert_eq!(v["diverged"], 0);
+    // The rate's 95 % interval per 1000 holds the measured rate and is not empty, even at 0.
+    let rate = 1000.0 * v["terminations"].as_f64().unwrap() / v["rollouts"].as_f64().unwrap();
+    let interval = &v["terminations_per_1000_95"];
+    let (lo, hi) = (interval[0].as_f64().unwrap(), interval[1].as_f64().unwrap());
+    assert!(
+        lo <= rate && rate <= hi && lo < hi,
+        "{interval} around {rate}"
+    );
     // A policy for Minimal does not run Dragon: the error names the key and both values.
     let wrong = kumi(&[
         "eval",

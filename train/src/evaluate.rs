@@ -66,6 +66,24 @@ impl ErrorStats {
     }
 }
 
+/// The 95 % Wilson score interval of a rate from `count` events in `trials` independent
+/// trials, as fractions `(low, high)` (None without trials). Unlike the normal approximation it
+/// stays inside [0, 1] and is not empty at a count of 0, which is where rare events such as falls
+/// sit: 0 of 1000 gives (0, 0.0038). Wilson, "Probable inference, the law of succession, and
+/// statistical inference", JASA 22 (1927).
+pub fn wilson_interval_95(count: usize, trials: usize) -> Option<(f64, f64)> {
+    if trials == 0 || count > trials {
+        return None;
+    }
+    const Z: f64 = 1.959_963_984_540_054; // the standard normal's 97.5 % quantile
+    let (n, p) = (trials as f64, count as f64 / trials as f64);
+    let z2 = Z * Z;
+    let denominator = 1.0 + z2 / n;
+    let center = (p + z2 / (2.0 * n)) / denominator;
+    let half = Z * (p * (1.0 - p) / n + z2 / (4.0 * n * n)).sqrt() / denominator;
+    Some(((center - half).max(0.0), (center + half).min(1.0)))
+}
+
 /// The evaluation's result, as `kumi eval arm --json` prints it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Evaluation {
@@ -219,6 +237,26 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn wilson_intervals_by_hand() {
+        // z^2 / (n + z^2) = 3.841459 / 1003.841459 at a count of 0.
+        let (lo, hi) = wilson_interval_95(0, 1000).unwrap();
+        assert!(
+            lo.abs() < 1e-12 && (hi - 0.003_826_758).abs() < 1e-8,
+            "{lo} {hi}"
+        );
+        let (lo, hi) = wilson_interval_95(50, 5000).unwrap();
+        assert!((lo - 0.007_593_773).abs() < 1e-8, "{lo}");
+        assert!((hi - 0.013_158_575).abs() < 1e-8, "{hi}");
+        let (lo, hi) = wilson_interval_95(67, 300).unwrap();
+        assert!((lo - 0.179_871_358).abs() < 1e-8 && (hi - 0.273_791_086).abs() < 1e-8);
+        // Every trial an event: n / (n + z^2) = 5 / 8.841459 up to 1, clamped there.
+        let (lo, hi) = wilson_interval_95(5, 5).unwrap();
+        assert!((lo - 0.565_517_5).abs() < 1e-6 && hi == 1.0, "{lo} {hi}");
+        assert_eq!(wilson_interval_95(0, 0), None);
+        assert_eq!(wilson_interval_95(3, 2), None);
+    }
 
     #[test]
     fn stats_by_hand() {

@@ -16,7 +16,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-use crate::evaluate::{ErrorStats, EvalError};
+use crate::evaluate::{wilson_interval_95, ErrorStats, EvalError};
 use crate::whole_body::{WholeBody, WholeBodyConfig};
 
 /// The result, as `kumi eval whole-body --json` prints it.
@@ -39,6 +39,10 @@ pub struct BodyEvaluation {
     /// errors and leg orientation are NaN in the episodes' CSV.
     #[serde(default)]
     pub diverged: usize,
+    /// The 95 % Wilson interval of the terminations per 1000 episodes, `[low, high]`
+    /// ([`BodyEvaluation::terminations_per_1000_95`]): how far a count of rare falls pins the rate.
+    #[serde(default)]
+    pub terminations_per_1000_95: Option<[f64; 2]>,
     /// Standard deviation of the Gaussian noise added to every action [policy units]; 0: the
     /// deterministic policy.
     #[serde(default)]
@@ -52,6 +56,12 @@ pub struct BodyEvaluation {
 }
 
 impl BodyEvaluation {
+    /// The 95 % Wilson interval of the termination rate, per 1000 episodes (None without
+    /// rollouts).
+    pub fn terminations_per_1000_95(terminations: usize, rollouts: usize) -> Option<[f64; 2]> {
+        wilson_interval_95(terminations, rollouts).map(|(lo, hi)| [1000.0 * lo, 1000.0 * hi])
+    }
+
     /// The result as a markdown table.
     pub fn markdown(&self) -> String {
         let row = ErrorStats::markdown_row;
@@ -75,7 +85,13 @@ impl BodyEvaluation {
                 0 => String::new(),
                 n => format!(" ({n} of them physics that blew up)"),
             },
-        ) + &if self.action_noise > 0.0 {
+        ) + &match self.terminations_per_1000_95 {
+            Some([lo, hi]) => format!(
+                "\nTerminations: {:.1} per 1000 episodes (95 % Wilson interval {lo:.1}-{hi:.1}).\n",
+                1000.0 * self.terminations as f64 / self.rollouts as f64
+            ),
+            None => String::new(),
+        } + &if self.action_noise > 0.0 {
             format!(
                 "\nWith Gaussian noise of std {} (policy units) on every action.\n",
                 self.action_noise
@@ -429,6 +445,10 @@ where
         contacts_per_episode: stats(&|e| e.contacts as f64, true),
         terminations: episodes.len() - finished.len(),
         diverged: episodes.iter().filter(|e| e.diverged).count(),
+        terminations_per_1000_95: BodyEvaluation::terminations_per_1000_95(
+            episodes.len() - finished.len(),
+            rollouts,
+        ),
         action_noise,
         episodes,
         action_names: config
@@ -455,6 +475,7 @@ mod tests {
             contacts_per_episode: stats,
             terminations: 67,
             diverged: 0,
+            terminations_per_1000_95: BodyEvaluation::terminations_per_1000_95(67, 300),
             action_noise: 0.0,
             episodes: Vec::new(),
             action_names: Vec::new(),
@@ -470,6 +491,19 @@ mod tests {
         assert_eq!(
             (v["terminations"].as_u64(), v["diverged"].as_u64()),
             (Some(67), Some(1))
+        );
+        // 67 of 300: 179.9-273.8 per 1000 (Wilson, by hand in `evaluate.rs`'s test).
+        assert!(blown.markdown().contains(
+            "\nTerminations: 223.3 per 1000 episodes (95 % Wilson interval 179.9-273.8).\n"
+        ));
+        let interval = &v["terminations_per_1000_95"];
+        assert!(
+            (interval[0].as_f64().unwrap() - 179.871).abs() < 1e-3,
+            "{interval}"
+        );
+        assert!(
+            (interval[1].as_f64().unwrap() - 273.791).abs() < 1e-3,
+            "{interval}"
         );
     }
 }
