@@ -41,6 +41,7 @@ pub struct BodyEvaluation {
     pub diverged: usize,
     /// The 95 % Wilson interval of the terminations per 1000 episodes, `[low, high]`
     /// ([`BodyEvaluation::terminations_per_1000_95`]): how far a count of rare falls pins the rate.
+    /// Kept for `--json`; the markdown derives it from `terminations` and `rollouts`.
     #[serde(default)]
     pub terminations_per_1000_95: Option<[f64; 2]>,
     /// Standard deviation of the Gaussian noise added to every action [policy units]; 0: the
@@ -85,7 +86,7 @@ impl BodyEvaluation {
                 0 => String::new(),
                 n => format!(" ({n} of them physics that blew up)"),
             },
-        ) + &match self.terminations_per_1000_95 {
+        ) + &match Self::terminations_per_1000_95(self.terminations, self.rollouts) {
             Some([lo, hi]) => format!(
                 "\nTerminations: {:.1} per 1000 episodes (95 % Wilson interval {lo:.1}-{hi:.1}).\n",
                 1000.0 * self.terminations as f64 / self.rollouts as f64
@@ -435,6 +436,7 @@ where
         };
         ErrorStats::of(&values)
     };
+    let terminations = episodes.len() - finished.len();
     Ok(BodyEvaluation {
         robot: model.name.clone(),
         engine: config.engine.to_string(),
@@ -443,12 +445,9 @@ where
         yaw_error_rad: stats(&|e| e.yaw, false),
         leg_orientation_rad: stats(&|e| e.leg, false),
         contacts_per_episode: stats(&|e| e.contacts as f64, true),
-        terminations: episodes.len() - finished.len(),
+        terminations,
         diverged: episodes.iter().filter(|e| e.diverged).count(),
-        terminations_per_1000_95: BodyEvaluation::terminations_per_1000_95(
-            episodes.len() - finished.len(),
-            rollouts,
-        ),
+        terminations_per_1000_95: BodyEvaluation::terminations_per_1000_95(terminations, rollouts),
         action_noise,
         episodes,
         action_names: config
