@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use kumi_runtime::{BackendChoice, WholeBodyPolicy};
 use kumi_terms::{ActionTerms, GoalBounds};
-use kumi_tests::{fresh_domain, number, numbers, peer, shipped_model, KumiProcess};
+use kumi_tests::{fresh_domain, number, peer, shipped_model, KumiProcess};
 use kumi_train::whole_body::WholeBody;
 use kumi_worlds::Engine;
 use nalgebra::Vector3;
@@ -371,92 +371,98 @@ fn modules_join_by_hand_robots_share_a_domain_duplicates_are_refused_and_a_dead_
     drop(by_hand);
 }
 
-/// Dragon runs on MuJoCo: its policy was trained there and does not carry over to rapier
-/// (policies/dragon_whole_body.md).
+/// The launches on MuJoCo, built with `--features mujoco` (as `.ci/run` builds the tests).
 #[cfg(feature = "mujoco")]
-/// Launches `robot` in lockstep on MuJoCo (its training engine), sends the target and watches a
-/// whole 12 s training episode. Asserts that no tick went unsynchronised and that every goal the
-/// policy sent reached each of `arm_modules`, none refused. The peer's output, the tool's final
-/// error [m], and the launch, which stops when dropped.
-fn reach_on_mujoco(robot: &str, arm_modules: &[&str]) -> (serde_json::Value, f64, KumiProcess) {
-    let domain = fresh_domain();
-    let launch = launch(
-        domain,
-        &[
-            robot,
-            "--lockstep",
-            "--engine",
-            "mujoco",
-            "--backend",
-            "tract",
-        ],
-    );
-    let expect = arm_statuses(robot, arm_modules);
-    let out = send_target_for(domain, robot, 12.0, &["--expect", &expect]);
-    let error = number(&out["position_error_m"]);
-    let d = &out["diagnostics"];
-    println!(
-        "{robot} over ROS (lockstep, MuJoCo): tool {error:.4} m and {:.3} rad from the target after 12 s of sim time, {:.1} s of wall time; diagnostics {d}",
-        number(&out["yaw_error_rad"]),
-        number(&out["wall_s"])
-    );
-    assert_eq!(number(&d["unsynchronised_ticks"]), 0.0, "{d}");
-    for module in arm_modules {
-        let arm = &out["all_diagnostics"][arm_status(robot, module)];
-        assert_eq!(number(&arm["goals_rejected"]), 0.0, "{module}: {arm}");
-        assert!(number(&arm["goals_accepted"]) > 300.0, "{module}: {arm}");
+mod on_mujoco {
+    use super::*;
+    use kumi_tests::numbers;
+
+    /// Launches `robot` in lockstep on MuJoCo (its training engine), sends the target and watches a
+    /// whole 12 s training episode. Asserts that no tick went unsynchronised and that every goal the
+    /// policy sent reached each of `arm_modules`, none refused. The peer's output, the tool's final
+    /// error [m], and the launch, which stops when dropped.
+    fn reach_on_mujoco(robot: &str, arm_modules: &[&str]) -> (serde_json::Value, f64, KumiProcess) {
+        let domain = fresh_domain();
+        let launch = launch(
+            domain,
+            &[
+                robot,
+                "--lockstep",
+                "--engine",
+                "mujoco",
+                "--backend",
+                "tract",
+            ],
+        );
+        let expect = arm_statuses(robot, arm_modules);
+        let out = send_target_for(domain, robot, 12.0, &["--expect", &expect]);
+        let error = number(&out["position_error_m"]);
+        let d = &out["diagnostics"];
+        println!(
+            "{robot} over ROS (lockstep, MuJoCo): tool {error:.4} m and {:.3} rad from the target after 12 s of sim time, {:.1} s of wall time; diagnostics {d}",
+            number(&out["yaw_error_rad"]),
+            number(&out["wall_s"])
+        );
+        assert_eq!(number(&d["unsynchronised_ticks"]), 0.0, "{d}");
+        for module in arm_modules {
+            let arm = &out["all_diagnostics"][arm_status(robot, module)];
+            assert_eq!(number(&arm["goals_rejected"]), 0.0, "{module}: {arm}");
+            assert!(number(&arm["goals_accepted"]) > 300.0, "{module}: {arm}");
+        }
+        (out, error, launch)
     }
-    (out, error, launch)
-}
 
-#[test]
-fn a_launched_dragon_reaches_a_target_from_rclpy_on_mujoco() {
-    let _one = one_at_a_time();
-    // Dragon turns by steering its rear wheel module. Both arm modules get every goal (the leg's
-    // home tool is at its full reach: a tighter reach check once refused all of its goals).
-    let (out, error, _launch) = reach_on_mujoco("dragon", &["arm0", "leg0"]);
-    // The bound: the 90th percentile of Dragon's final error over 1000 MuJoCo rollouts
-    // (0.42 m, policies/dragon_whole_body.md). The episode is not the same on every run: the
-    // robot settles on its wheels while it waits, and the target lands on whichever tick the
-    // peer gets to (0.06, 0.09 and 0.13 m measured). A robot whose goals went astray ends
-    // metres away.
-    assert!(error < 0.42, "{out}");
-}
+    /// Dragon runs on MuJoCo: its policy was trained there and does not carry over to rapier
+    /// (policies/dragon_whole_body.md).
+    #[test]
+    fn a_launched_dragon_reaches_a_target_from_rclpy_on_mujoco() {
+        let _one = one_at_a_time();
+        // Dragon turns by steering its rear wheel module. Both arm modules get every goal (the leg's
+        // home tool is at its full reach: a tighter reach check once refused all of its goals).
+        let (out, error, _launch) = reach_on_mujoco("dragon", &["arm0", "leg0"]);
+        // The bound: the 90th percentile of Dragon's final error over 1000 MuJoCo rollouts
+        // (0.42 m, policies/dragon_whole_body.md). The episode is not the same on every run: the
+        // robot settles on its wheels while it waits, and the target lands on whichever tick the
+        // peer gets to (0.06, 0.09 and 0.13 m measured). A robot whose goals went astray ends
+        // metres away.
+        assert!(error < 0.42, "{out}");
+    }
 
-/// The 90th percentile of Tricycle's closest approach [m] to its target over the MuJoCo
-/// rollouts that started within 1.5 m of it, as this target does (0.0568 m over 180 of 1000;
-/// policies/tricycle_whole_body.md). The closest approach, not the final error: Tricycle comes
-/// close and then wanders near the target (an earlier policy's final errors were 0.40-0.72 m
-/// in eight runs here, its closest approaches 0.05-0.09 m), so its final error depends on the
-/// instant the episode ends.
-const TRICYCLE_CLOSEST_P90: f64 = 0.0568;
+    /// The 90th percentile of Tricycle's closest approach [m] to its target over the MuJoCo
+    /// rollouts that started within 1.5 m of it, as this target does (0.0568 m over 180 of 1000;
+    /// policies/tricycle_whole_body.md). The closest approach, not the final error: Tricycle comes
+    /// close and then wanders near the target (an earlier policy's final errors were 0.40-0.72 m
+    /// in eight runs here, its closest approaches 0.05-0.09 m), so its final error depends on the
+    /// instant the episode ends.
+    const TRICYCLE_CLOSEST_P90: f64 = 0.0568;
 
-#[test]
-fn a_launched_tricycle_reaches_a_target_from_rclpy_on_mujoco() {
-    let _one = one_at_a_time();
-    // Four arm nodes, each fed every goal the policy sent: the manipulator and three legs.
-    let (out, error, _launch) = reach_on_mujoco("tricycle", &["arm0", "leg0", "leg1", "leg2"]);
-    // The peer's trajectory rows are [t, x, y, z, yaw] of the tool.
-    let closest = out["trajectory"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|row| {
-            let row = numbers(row);
-            (0..3)
-                .map(|k| (row[k + 1] - TRICYCLE_TARGET[k]).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        })
-        .fold(f64::INFINITY, f64::min);
-    println!(
-        "tricycle: closest approach {closest:.4} m, final {error:.4} m, tipped over {}",
-        out["diagnostics"]["tipped_over"]
-    );
-    // A robot whose goals went astray never comes near; one that fell on the way neither. A
-    // fall after coming close is not asserted against: 1 of those 180 rollouts fell (0.6 %),
-    // and the policy's falls are measured by `kumi eval whole-body`, not here.
-    assert!(closest < TRICYCLE_CLOSEST_P90, "{out}");
+    #[test]
+    fn a_launched_tricycle_reaches_a_target_from_rclpy_on_mujoco() {
+        let _one = one_at_a_time();
+        // Four arm nodes, each fed every goal the policy sent: the manipulator and three legs.
+        let (out, error, _launch) = reach_on_mujoco("tricycle", &["arm0", "leg0", "leg1", "leg2"]);
+        // The peer's trajectory rows are [t, x, y, z, yaw] of the tool.
+        let closest = out["trajectory"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|row| {
+                let row = numbers(row);
+                (0..3)
+                    .map(|k| (row[k + 1] - TRICYCLE_TARGET[k]).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .fold(f64::INFINITY, f64::min);
+        println!(
+            "tricycle: closest approach {closest:.4} m, final {error:.4} m, tipped over {}",
+            out["diagnostics"]["tipped_over"]
+        );
+        // A robot whose goals went astray never comes near; one that fell on the way neither. A
+        // fall after coming close is not asserted against: 1 of those 180 rollouts fell (0.6 %),
+        // and the policy's falls are measured by `kumi eval whole-body`, not here.
+        assert!(closest < TRICYCLE_CLOSEST_P90, "{out}");
+    }
 }
 
 #[test]
