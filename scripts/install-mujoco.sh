@@ -11,7 +11,9 @@ VENV=target/mujoco/venv
 if ! "$VENV/bin/python" -c "import mujoco, sys; sys.exit(mujoco.__version__ != '$VERSION')" 2>/dev/null; then
     echo "== installing mujoco==$VERSION (PyPI) into $VENV"
     python3 -m venv "$VENV"
-    "$VENV/bin/pip" install --quiet --disable-pip-version-check "mujoco==$VERSION"
+    # pip's scratch on this disk, not in /tmp (which may be small), and no cache.
+    mkdir -p target/pip-tmp
+    TMPDIR="$PWD/target/pip-tmp" PIP_NO_CACHE_DIR=1 "$VENV/bin/pip" install --quiet --disable-pip-version-check "mujoco==$VERSION"
 fi
 PKG=$("$VENV/bin/python" -c "import mujoco, os; print(os.path.dirname(mujoco.__file__))")
 mkdir -p target/mujoco/lib
