@@ -66,7 +66,9 @@ pub struct EvalBodyArgs {
     #[arg(long)]
     pub episodes: Option<PathBuf>,
     /// Also write every control step of the first `--traced` episodes to this CSV: base pose,
-    /// tool pose, target and errors, in the world frame (a column names the engine).
+    /// tool pose, target and errors, in the world frame; the base's tilt, horizontal speed and
+    /// yaw rate, the turn governor's scale for them, the links on the ground and the action
+    /// (a column names the engine).
     #[arg(long)]
     pub trace: Option<PathBuf>,
     /// How many episodes `--trace` records.

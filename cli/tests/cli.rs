@@ -395,21 +395,40 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         (end - rows[1][4].parse::<f64>().unwrap()).abs() < 1e-3,
         "{trace}"
     );
-    // The base's tilt, the links on the ground and the action that led to each step:
-    // Minimal's 7 values, by name, empty at the start.
+    // The base's tilt, speed and yaw rate, the turn governor's scale, the links on the ground
+    // and the action that led to each step: Minimal's 7 values, by name, empty at the start.
     let header: Vec<&str> = lines[0].split(',').collect();
-    assert_eq!(header[16..18], ["tilt_rad", "ground_links"]);
-    assert_eq!(header.len(), 18 + 7, "{}", lines[0]);
-    assert!(header[18..].iter().all(|h| h.starts_with("action:")));
+    assert_eq!(
+        header[16..21],
+        [
+            "tilt_rad",
+            "base_speed_m_s",
+            "base_yaw_rate_rad_s",
+            "turn_governor_scale",
+            "ground_links"
+        ]
+    );
+    assert_eq!(header.len(), 21 + 7, "{}", lines[0]);
+    assert!(header[21..].iter().all(|h| h.starts_with("action:")));
     assert!(header.contains(&"action:wheel0/velocity"), "{}", lines[0]);
     let cells = |line: &str| -> Vec<String> { line.split(',').map(String::from).collect() };
     assert!(lines[1..].iter().all(|l| cells(l).len() == header.len()));
-    assert!(cells(lines[1])[18..].iter().all(String::is_empty));
+    assert!(cells(lines[1])[21..].iter().all(String::is_empty));
     let numeric = |c: &String| c.parse::<f64>().is_ok_and(f64::is_finite);
-    assert!(numeric(&cells(lines[2])[16]) && cells(lines[2])[18..].iter().all(numeric));
+    assert!(numeric(&cells(lines[2])[16]) && cells(lines[2])[21..].iter().all(numeric));
+    // Minimal drives off (its speed is not zero all along) and has no turn governor.
+    let column = |i: usize| -> Vec<f64> {
+        lines[1..]
+            .iter()
+            .map(|l| cells(l)[i].parse().unwrap())
+            .collect()
+    };
+    assert!(column(17).iter().all(|v| *v >= 0.0) && column(17).iter().any(|v| *v > 0.01));
+    assert!(column(18).iter().all(|w| w.is_finite()));
+    assert!(column(19).iter().all(|s| *s == 1.0), "{:?}", column(19));
     // Minimal stands on its wheel module's wheels (and skids): the links on the ground are
     // named, sorted, each once, and its wheels are among them.
-    let grounds: Vec<String> = lines[1..].iter().map(|l| cells(l)[17].clone()).collect();
+    let grounds: Vec<String> = lines[1..].iter().map(|l| cells(l)[20].clone()).collect();
     for links in &grounds {
         let names: Vec<&str> = links.split('|').filter(|n| !n.is_empty()).collect();
         assert!(names.windows(2).all(|w| w[0] < w[1]), "{links}");

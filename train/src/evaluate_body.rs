@@ -7,6 +7,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use kumi_model::{RobotModel, Role};
+use kumi_terms::action::{planar_twist, turn_governor};
 use kumi_terms::observation::{tool_yaw, Target};
 use kumi_terms::termination::tilt;
 use kumi_worlds::{SimWorld, GROUND};
@@ -205,6 +206,12 @@ pub struct TraceStep {
     /// Base tilt [rad]: the angle between its z axis and the world's, by the rule a fall is
     /// judged by ([`tilt`]).
     pub tilt_rad: f64,
+    /// The base's horizontal speed [m/s] and yaw rate [rad/s] in the world frame: what the
+    /// turn governor reads ([`planar_twist`]).
+    pub twist: [f64; 2],
+    /// The turn governor's scale for these two ([`turn_governor`]; 1 without a governor),
+    /// which the next step's wheel commands get.
+    pub governor_scale: f64,
     /// The links that touch the ground, sorted, each once ([`SimWorld::ground_contacts`]; the
     /// wheels of a robot that stands on them: a wheel missing is a wheel off the ground).
     pub ground_links: Vec<String>,
@@ -221,18 +228,23 @@ impl TraceStep {
             .iter()
             .map(|n| format!(",action:{n}"))
             .collect();
-        format!("episode,step,base_x_m,base_y_m,base_yaw_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,target_x_m,target_y_m,target_z_m,target_yaw_rad,position_error_m,yaw_error_rad,tilt_rad,ground_links{actions}")
+        format!("episode,step,base_x_m,base_y_m,base_yaw_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,target_x_m,target_y_m,target_z_m,target_yaw_rad,position_error_m,yaw_error_rad,tilt_rad,base_speed_m_s,base_yaw_rate_rad_s,turn_governor_scale,ground_links{actions}")
     }
 
     fn of(env: &WholeBody, action: &[f32]) -> Self {
         let (base, tool) = (env.world().base_pose(), env.tool_pose_w());
         let (b, t) = (base.translation.vector, tool.translation.vector);
         let (position, yaw) = env.errors();
+        let (linear_w, angular_w) = env.world().base_twist_w();
+        let (speed_m_s, yaw_rate_rad_s) = planar_twist(&linear_w, &angular_w);
+        let limit = env.terms().lateral_acceleration_m_s2();
         Self {
             base: [b.x, b.y, tool_yaw(&base.rotation)],
             tool: [t.x, t.y, t.z, tool_yaw(&tool.rotation)],
             errors: [position, yaw],
             tilt_rad: tilt(&base.rotation),
+            twist: [speed_m_s, yaw_rate_rad_s],
+            governor_scale: turn_governor(limit, speed_m_s, yaw_rate_rad_s),
             ground_links: env.world().ground_contacts(),
             action: action.to_vec(),
         }
@@ -249,6 +261,8 @@ impl TraceStep {
             .chain(&[p.x, p.y, p.z, target.yaw])
             .chain(&self.errors)
             .chain(&[self.tilt_rad])
+            .chain(&self.twist)
+            .chain(&[self.governor_scale])
             .map(|v| format!("{v:.4}"))
             .collect::<Vec<_>>();
         values.push(self.ground_links.join("|"));
