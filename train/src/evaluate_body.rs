@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use kumi_model::{RobotModel, Role};
-use kumi_terms::action::{planar_twist, turn_governor};
+use kumi_terms::action::planar_twist;
 use kumi_terms::observation::{tool_yaw, Target};
 use kumi_terms::termination::tilt;
 use kumi_worlds::{SimWorld, GROUND};
@@ -209,8 +209,9 @@ pub struct TraceStep {
     /// The base's horizontal speed [m/s] and yaw rate [rad/s] in the world frame: what the
     /// turn governor reads ([`planar_twist`]).
     pub twist: [f64; 2],
-    /// The turn governor's scale for these two ([`turn_governor`]; 1 without a governor),
-    /// which the next step's wheel commands get.
+    /// The turn governor's scale for this twist
+    /// ([`kumi_terms::ActionTerms::governor_scale`]; 1 without a governor), which the next
+    /// step's wheel commands get.
     pub governor_scale: f64,
     /// The links that touch the ground, sorted, each once ([`SimWorld::ground_contacts`]; the
     /// wheels of a robot that stands on them: a wheel missing is a wheel off the ground).
@@ -237,14 +238,13 @@ impl TraceStep {
         let (position, yaw) = env.errors();
         let (linear_w, angular_w) = env.world().base_twist_w();
         let (speed_m_s, yaw_rate_rad_s) = planar_twist(&linear_w, &angular_w);
-        let limit = env.terms().lateral_acceleration_m_s2();
         Self {
             base: [b.x, b.y, tool_yaw(&base.rotation)],
             tool: [t.x, t.y, t.z, tool_yaw(&tool.rotation)],
             errors: [position, yaw],
             tilt_rad: tilt(&base.rotation),
             twist: [speed_m_s, yaw_rate_rad_s],
-            governor_scale: turn_governor(limit, speed_m_s, yaw_rate_rad_s),
+            governor_scale: env.terms().governor_scale(&linear_w, &angular_w),
             ground_links: env.world().ground_contacts(),
             action: action.to_vec(),
         }

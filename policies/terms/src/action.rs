@@ -677,21 +677,31 @@ impl ActionTerms {
         self.wheels().find_map(|w| w.lateral_acceleration_m_s2)
     }
 
-    /// Scales `wheel_velocities` [rad/s] (as [`Commands::wheel_velocities`]) by the turn
-    /// governor's scale for the base's linear [m/s] and angular [rad/s] velocity in a world
-    /// frame with z up ([`planar_twist`]).
+    /// The turn governor's scale, in [0, 1], for the base's linear [m/s] and angular [rad/s]
+    /// velocity in a world frame with z up ([`planar_twist`], [`turn_governor`] with these
+    /// terms' limit): what [`ActionTerms::govern`] multiplies the wheel commands by.
+    pub fn governor_scale(
+        &self,
+        linear_velocity_w: &Vector3<f64>,
+        angular_velocity_w: &Vector3<f64>,
+    ) -> f64 {
+        let (speed_xy_m_s, yaw_rate_rad_s) = planar_twist(linear_velocity_w, angular_velocity_w);
+        turn_governor(
+            self.lateral_acceleration_m_s2(),
+            speed_xy_m_s,
+            yaw_rate_rad_s,
+        )
+    }
+
+    /// Scales `wheel_velocities` [rad/s] (as [`Commands::wheel_velocities`]) by
+    /// [`ActionTerms::governor_scale`] for the base's linear and angular velocity.
     pub fn govern(
         &self,
         wheel_velocities: &mut [f64],
         linear_velocity_w: &Vector3<f64>,
         angular_velocity_w: &Vector3<f64>,
     ) {
-        let (speed_xy_m_s, yaw_rate_rad_s) = planar_twist(linear_velocity_w, angular_velocity_w);
-        let scale = turn_governor(
-            self.lateral_acceleration_m_s2(),
-            speed_xy_m_s,
-            yaw_rate_rad_s,
-        );
+        let scale = self.governor_scale(linear_velocity_w, angular_velocity_w);
         wheel_velocities.iter_mut().for_each(|v| *v *= scale);
     }
 }

@@ -540,6 +540,10 @@ fn a_lateral_acceleration_governs_the_wheel_commands_and_reads_back() {
     let mut wheels = vec![2.0, -1.0, 0.5];
     // 0.5 m/s horizontally (a vertical speed is not part of the turn) at 0.4 rad/s about z.
     let turning = Vector3::new(0.0, 0.0, 0.4);
+    assert_eq!(
+        terms.governor_scale(&Vector3::new(0.5, 0.0, 9.0), &turning),
+        0.5
+    );
     terms.govern(&mut wheels, &Vector3::new(0.5, 0.0, 9.0), &turning);
     assert_eq!(wheels, [1.0, -0.5, 0.25]);
     terms.govern(&mut wheels, &Vector3::new(0.1, 0.0, 0.0), &turning);
