@@ -104,6 +104,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
                 json: false,
                 episodes: None,
                 trace: None,
+                trace_plot: None,
                 traced: 0,
                 action_noise: 0.0,
                 push_m_s: 0.0,

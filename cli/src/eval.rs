@@ -71,9 +71,16 @@ pub struct EvalBodyArgs {
     /// (a column names the engine).
     #[arg(long)]
     pub trace: Option<PathBuf>,
-    /// How many episodes `--trace` records.
+    /// How many episodes `--trace` and `--trace-plot` record.
     #[arg(long, default_value_t = 10)]
     pub traced: usize,
+    /// Also draw the first `--traced` episodes as SVG in this directory (made if missing), per
+    /// engine: `<engine>_paths.svg`, a top view of each episode's base path and its target, and
+    /// `<engine>_tilt.svg`, the base's tilt over time against the tilt that ends an episode.
+    /// Episodes that fell are black, with the time they fell (or their physics blew up) in the
+    /// legend.
+    #[arg(long)]
+    pub trace_plot: Option<PathBuf>,
     /// Standard deviation of Gaussian noise added to every action value (policy units, before
     /// the terms clip and scale it), as training explores: how the policy fares off its mean.
     /// 0 runs the deterministic policy.
@@ -128,6 +135,17 @@ pub fn run(what: EvalCommand) -> Result<()> {
     }
 }
 
+impl EvalBodyArgs {
+    /// How many episodes to trace: `--traced` where a trace or its plot is asked for, else none.
+    fn traced_episodes(&self) -> usize {
+        if self.trace.is_some() || self.trace_plot.is_some() {
+            self.traced
+        } else {
+            0
+        }
+    }
+}
+
 /// A path relative to the working directory when inside it, so reports do not carry a home
 /// path.
 fn shown(path: &std::path::Path) -> String {
@@ -144,6 +162,9 @@ fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
     }
     if let Some(path) = &args.trace {
         write_csv(path, &results.trace_csv(), "traces")?;
+    }
+    if let Some(dir) = &args.trace_plot {
+        results.write_trace_plots(dir)?;
     }
     if args.json {
         match results.evaluations.as_slice() {
@@ -170,6 +191,10 @@ pub struct BodyEvaluations {
     pub header: String,
     /// Environment steps the policy was trained for (from its metadata; `?` if absent).
     pub steps: String,
+    /// The policy's control rate [Hz]: one traced step each.
+    pub control_hz: f64,
+    /// The base tilt [rad] past which an episode ends (a fall).
+    pub tilt_limit_rad: f64,
 }
 
 impl BodyEvaluations {
@@ -200,6 +225,27 @@ impl BodyEvaluations {
             }
         }
         text
+    }
+
+    /// Draws each engine's traced episodes into `dir` (`--trace-plot`).
+    fn write_trace_plots(&self, dir: &std::path::Path) -> Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        for result in &self.evaluations {
+            let title = format!("{} on {}", result.robot, result.engine);
+            let plots = crate::trace_plot::trace_plots(
+                &title,
+                &result.episodes,
+                self.control_hz,
+                self.tilt_limit_rad,
+            );
+            for (name, svg) in [("paths", plots.paths_svg), ("tilt", plots.tilt_svg)] {
+                let path = dir.join(format!("{}_{name}.svg", result.engine));
+                std::fs::write(&path, svg)
+                    .with_context(|| format!("writing {}", path.display()))?;
+                eprintln!("trace plot written to {}", path.display());
+            }
+        }
+        Ok(())
     }
 
     pub fn markdown(&self) -> String {
@@ -243,6 +289,10 @@ fn policy_load_error(
 /// Evaluates the policy `args` names in each of its engines.
 pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
     anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
+    anyhow::ensure!(
+        args.trace_plot.is_none() || args.traced > 0,
+        "--trace-plot needs at least one traced episode (--traced)"
+    );
     let push = args.push()?;
     let model = load_model(&args.morphology)?;
     let file = crate::train::read_shipped_policy_config(
@@ -305,7 +355,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
             Protocol {
                 rollouts: args.rollouts,
                 seed: args.seed,
-                traced: if args.trace.is_some() { args.traced } else { 0 },
+                traced: args.traced_episodes(),
                 action_noise: args.action_noise,
             },
             || {
@@ -347,6 +397,8 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         evaluations: results,
         header,
         steps,
+        control_hz,
+        tilt_limit_rad: file.task.tilt_limit_rad,
     })
 }
 
@@ -512,4 +564,29 @@ fn working_table(
         );
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: EvalBodyArgs,
+    }
+
+    fn traced(flags: &[&str]) -> usize {
+        let argv = ["kumi", "minimal"].iter().chain(flags);
+        Cli::try_parse_from(argv).unwrap().args.traced_episodes()
+    }
+
+    #[test]
+    fn episodes_are_traced_for_a_trace_or_its_plot_only() {
+        assert_eq!(traced(&[]), 0);
+        assert_eq!(traced(&["--traced", "3"]), 0);
+        assert_eq!(traced(&["--trace", "t.csv"]), 10);
+        assert_eq!(traced(&["--trace-plot", "plots", "--traced", "3"]), 3);
+    }
 }

@@ -12,6 +12,7 @@ mod launch;
 mod plot;
 mod report;
 mod sim;
+mod trace_plot;
 mod train;
 mod whole_body;
 

@@ -366,8 +366,27 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         trace.to_str().unwrap(),
         "--traced",
         "1",
+        "--trace-plot",
+        out_dir.join("plots").to_str().unwrap(),
     ]);
     assert_eq!(v["rollouts"], 2);
+    // The traced episode drawn: its base path and target from above, its tilt over time
+    // beside the fall limit (Minimal's 0.6 rad).
+    let svg = |name: &str| std::fs::read_to_string(out_dir.join("plots").join(name)).unwrap();
+    let engine = v["engine"].as_str().unwrap();
+    let (paths, tilt) = (
+        svg(&format!("{engine}_paths.svg")),
+        svg(&format!("{engine}_tilt.svg")),
+    );
+    let title = format!("minimal on {engine}");
+    assert!(
+        paths.contains(&title) && paths.contains(">episode 0"),
+        "{paths}"
+    );
+    assert!(!paths.contains(">episode 1"), "{paths}");
+    assert_eq!(paths.matches("<polyline").count(), 1, "{paths}");
+    assert_eq!(tilt.matches("<polyline").count(), 2, "{tilt}");
+    assert!(tilt.contains("fall: tilt past 0.600 rad"), "{tilt}");
     // One row per episode; for the one traced episode a row at the start and one after each
     // step, its first and last errors those the episode started and ended with.
     let episodes = std::fs::read_to_string(episodes).unwrap();
