@@ -47,7 +47,7 @@ pub fn trace_plots(
         } else {
             &e.trace[..]
         };
-        end_s = end_s.max(e.trace.len().saturating_sub(1) as f64 / control_hz);
+        end_s = end_s.max(trace.len().saturating_sub(1) as f64 / control_hz);
         paths.push(Path {
             label: label.clone(),
             colour,
