@@ -44,7 +44,12 @@ pub struct CompareArgs {
 
 /// The variants compared, in the order of every table and legend.
 pub const VARIANTS: [Variant; 3] = [Variant::Hierarchical, Variant::Flat, Variant::Penalty];
-const COLOURS: [&str; 3] = ["#1f77b4", "#ff7f0e", "#2ca02c"];
+/// One colour per variant, in `VARIANTS`' order.
+const COLOURS: [&str; 3] = [
+    crate::plot::SERIES[0],
+    crate::plot::SERIES[1],
+    crate::plot::SERIES[2],
+];
 
 /// One policy's evaluation in one engine.
 #[derive(Debug, Clone)]
@@ -79,6 +84,7 @@ pub struct Settings {
 
 pub fn run(args: CompareArgs) -> Result<()> {
     anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
+    crate::output::ensure_dir(&args.out)?;
     let mut entries = Vec::new();
     let mut curves = Vec::new();
     for robot in &args.morphologies {
@@ -200,7 +206,7 @@ pub fn write_report(
     curves: &[Curve],
     settings: &Settings,
 ) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    crate::output::ensure_dir(out)?;
     let mut files = Vec::new();
     let mut figures = Vec::new();
     for engine in &settings.engines {

@@ -175,7 +175,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("runs/demo-{robot}")));
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    crate::output::ensure_dir(&out)?;
     let domain = args
         .domain
         .unwrap_or(100 + (std::process::id() % 100) as u16);
@@ -407,12 +407,12 @@ fn report(
         &[
             plot::Path {
                 label: "base".into(),
-                colour: "#7f7f7f",
+                colour: plot::GREY,
                 points: samples.iter().map(|s| [s.base[0], s.base[1]]).collect(),
             },
             plot::Path {
                 label: "tool".into(),
-                colour: "#1f77b4",
+                colour: plot::SERIES[0],
                 points: samples
                     .iter()
                     .map(|s| [s.tool.translation.x, s.tool.translation.y])

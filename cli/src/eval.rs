@@ -102,11 +102,9 @@ pub struct EvalBodyArgs {
 }
 
 impl EvalBodyArgs {
-    /// The pushes to evaluate under (none unless `--push-m-s` asks).
+    /// The pushes `--push-*` ask for (none when both sizes are 0). The interval is checked
+    /// even then, so that a wrong one is not passed over silently.
     fn push(&self) -> Result<Option<PushConfig>> {
-        if self.push_m_s == 0.0 && self.push_tip_rad_s == 0.0 {
-            return Ok(None);
-        }
         let [lo, hi] = self.push_interval_s[..] else {
             bail!("--push-interval-s takes two times, LO,HI [s]");
         };
@@ -115,8 +113,9 @@ impl EvalBodyArgs {
             velocity_m_s: self.push_m_s,
             tip_rad_s: self.push_tip_rad_s,
         };
-        push.check()?;
-        Ok(Some(push))
+        push.check().context("checking the --push-* options")?;
+        let none = self.push_m_s == 0.0 && self.push_tip_rad_s == 0.0;
+        Ok((!none).then_some(push))
     }
 }
 
@@ -136,6 +135,21 @@ pub fn run(what: EvalCommand) -> Result<()> {
 }
 
 impl EvalBodyArgs {
+    /// Checks `--episodes` and `--trace` and makes `--trace-plot`'s folder before the
+    /// evaluation, so that a bad path fails in a second instead of after the episodes.
+    fn check_outputs(&self) -> Result<()> {
+        if let Some(path) = &self.episodes {
+            crate::output::check_file(path, "--episodes")?;
+        }
+        if let Some(path) = &self.trace {
+            crate::output::check_file(path, "--trace")?;
+        }
+        if let Some(dir) = &self.trace_plot {
+            crate::output::ensure_dir(dir)?;
+        }
+        Ok(())
+    }
+
     /// How many episodes to trace: `--traced` where a trace or its plot is asked for, else none.
     fn traced_episodes(&self) -> usize {
         if self.trace.is_some() || self.trace_plot.is_some() {
@@ -156,6 +170,7 @@ fn shown(path: &std::path::Path) -> String {
 }
 
 fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
+    args.check_outputs()?;
     let results = evaluate_whole_body(&args)?;
     if let Some(path) = &args.episodes {
         write_csv(path, &results.episodes_csv(), "episodes")?;
@@ -229,7 +244,7 @@ impl BodyEvaluations {
 
     /// Draws each engine's traced episodes into `dir` (`--trace-plot`).
     fn write_trace_plots(&self, dir: &std::path::Path) -> Result<()> {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        crate::output::ensure_dir(dir)?;
         for result in &self.evaluations {
             let title = format!("{} on {}", result.robot, result.engine);
             let plots = crate::trace_plot::trace_plots(

@@ -9,6 +9,7 @@ mod demo;
 mod engine;
 mod eval;
 mod launch;
+mod output;
 mod plot;
 mod report;
 mod sim;

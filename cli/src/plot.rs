@@ -17,6 +17,17 @@ pub struct Mark {
     pub yaw: f64,
 }
 
+/// The colours of a figure's series, in turn: matplotlib's tab10 without its red, which marks
+/// targets, and its grey ([`GREY`]), then two of tab20b's blues.
+pub const SERIES: [&str; 10] = [
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#bcbd22", "#17becf",
+    "#393b79", "#6b6ecf",
+];
+/// The colour of a target (a [`Mark`]).
+pub const TARGET: &str = "#d62728";
+/// The colour of what stands behind the series: a limit, the base under a tool's path.
+pub const GREY: &str = "#7f7f7f";
+
 const SIZE_PX: f64 = 640.0;
 const MARGIN_PX: f64 = 48.0;
 
@@ -107,7 +118,7 @@ pub fn top_down(title: &str, paths: &[Path], marks: &[Mark]) -> String {
         ]);
         let _ = writeln!(
             svg,
-            r##"<circle cx="{x:.1}" cy="{y:.1}" r="6" fill="none" stroke="#d62728" stroke-width="2"/><line x1="{x:.1}" y1="{y:.1}" x2="{:.1}" y2="{:.1}" stroke="#d62728" stroke-width="2"/><text x="{:.1}" y="{:.1}">{}</text>"##,
+            r##"<circle cx="{x:.1}" cy="{y:.1}" r="6" fill="none" stroke="{TARGET}" stroke-width="2"/><line x1="{x:.1}" y1="{y:.1}" x2="{:.1}" y2="{:.1}" stroke="{TARGET}" stroke-width="2"/><text x="{:.1}" y="{:.1}">{}</text>"##,
             tip.0,
             tip.1,
             x + 8.0,

@@ -112,6 +112,9 @@ fn nearest(goal: &Goal, training: &[Goal]) -> (f64, f64) {
 
 fn goal_bounds(args: GoalBoundsArgs) -> Result<()> {
     anyhow::ensure!(args.samples > 0, "--samples must be positive");
+    if let Some(out) = &args.out {
+        crate::output::check_file(out, "--out")?;
+    }
     let library = ModuleLibrary::shipped();
     let goals = crate::train::read_config(args.skill_config.as_deref())?.goals;
     let distribution: GoalDistribution = goals.resolve().map_err(anyhow::Error::msg)?;

@@ -1,19 +1,15 @@
 //! `kumi eval whole-body --trace-plot DIR`: the traced episodes drawn, so that a fall can be
 //! looked at rather than read out of the trace CSV. Pure: episodes in, SVG documents out.
 
-use crate::plot::{line_plot, top_down, Mark, Path, Series};
+use crate::plot::{self, line_plot, top_down, Mark, Path, Series};
 use kumi_train::evaluate_body::Episode;
 
-/// Colours of the episodes that stood, in turn (matplotlib's tab10 without its red, which
-/// marks the targets, and its grey, which marks the fall limit; two of tab20b's blues).
-const STOOD: [&str; 10] = [
-    "#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#bcbd22", "#17becf",
-    "#393b79", "#6b6ecf",
-];
+/// Colours of the episodes that stood, in turn.
+const STOOD: [&str; 10] = plot::SERIES;
 /// The colour of an episode that fell or whose physics blew up.
 const FELL: &str = "#000000";
 /// The colour of the tilt past which an episode ends.
-const LIMIT: &str = "#7f7f7f";
+const LIMIT: &str = plot::GREY;
 
 /// The two drawings of one engine's traced episodes.
 pub struct TracePlots {

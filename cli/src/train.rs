@@ -489,7 +489,7 @@ fn train<E: Environment>(
     name: &str,
 ) -> Result<PathBuf> {
     let metric_names = envs.first().map(|e| e.metric_names()).unwrap_or(&[]);
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    crate::output::ensure_dir(out)?;
     let total = config.total_steps;
     let mut trainer = Trainer::new(config, envs)?;
     if let Some(dir) = &args.resume {

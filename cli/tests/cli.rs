@@ -675,6 +675,40 @@ fn eval_whole_body_names_a_missing_onnx_runtime_as_such_not_as_a_config_mismatch
 }
 
 #[test]
+fn a_bad_output_path_is_refused_before_any_episode_runs() {
+    let missing = std::env::temp_dir().join(format!("kumi-no-such-folder-{}", std::process::id()));
+    let episodes = missing.join("episodes.csv");
+    let out = kumi(&[
+        "eval",
+        "whole-body",
+        "minimal",
+        "--rollouts",
+        "1000",
+        "--episodes",
+        episodes.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--episodes") && stderr.contains("does not exist"),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("evaluating"),
+        "it must fail before the episodes: {stderr}"
+    );
+    // A folder where a file is asked for.
+    let dir = std::env::temp_dir();
+    let out = kumi(&["report", "goal-bounds", "--out", dir.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--out") && stderr.contains("is a folder"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn arm_node_names_the_modules_it_could_drive() {
     let out = kumi(&["arm", "leg9", "--robot", "tricycle"]);
     assert!(!out.status.success());

@@ -87,18 +87,25 @@ pub struct PushConfig {
 }
 
 impl PushConfig {
+    /// Refuses an interval that is not `0 < lo <= hi < inf` [s] and a velocity or tip rate that
+    /// is not finite and `>= 0`, naming the field and its value.
     pub fn check(&self) -> Result<(), EnvError> {
         let [lo, hi] = self.interval_s;
-        let speeds = [self.velocity_m_s, self.tip_rad_s];
-        let ok = lo > 0.0 && hi >= lo && hi.is_finite();
-        if ok && speeds.iter().all(|v| v.is_finite() && *v >= 0.0) {
-            Ok(())
-        } else {
-            Err(EnvError::Settings(format!(
-                "invalid [push]: the interval must be a positive range [lo, hi] [s], the \
-                 velocity [m/s] and the tip rate [rad/s] finite and >= 0: {self:?}"
-            )))
+        let bad = |what: String| Err(EnvError::Settings(format!("invalid [push]: {what}")));
+        if !(lo > 0.0 && hi >= lo && hi.is_finite()) {
+            return bad(format!(
+                "interval_s [{lo}, {hi}] must be a range [lo, hi] of seconds with 0 < lo <= hi"
+            ));
         }
+        for (name, value) in [
+            ("velocity_m_s", self.velocity_m_s),
+            ("tip_rad_s", self.tip_rad_s),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return bad(format!("{name} {value} must be finite and >= 0"));
+            }
+        }
+        Ok(())
     }
 
     /// Control steps until the next push (at least 1), at `control_hz`.
@@ -836,14 +843,14 @@ mod tests {
 
     #[test]
     fn bad_push_settings_are_refused() {
-        for (interval_s, velocity_m_s, tip_rad_s) in [
-            ([0.0, 1.0], 0.5, 0.1),
-            ([2.0, 1.0], 0.5, 0.1),
-            ([1.0, f64::INFINITY], 0.5, 0.1),
-            ([1.0, 2.0], -0.1, 0.1),
-            ([1.0, 2.0], f64::NAN, 0.1),
-            ([1.0, 2.0], 0.5, -0.1),
-            ([1.0, 2.0], 0.5, f64::INFINITY),
+        for (interval_s, velocity_m_s, tip_rad_s, named) in [
+            ([0.0, 1.0], 0.5, 0.1, "interval_s [0, 1]"),
+            ([2.0, 1.0], 0.5, 0.1, "interval_s [2, 1]"),
+            ([1.0, f64::INFINITY], 0.5, 0.1, "interval_s [1, inf]"),
+            ([1.0, 2.0], -0.1, 0.1, "velocity_m_s -0.1"),
+            ([1.0, 2.0], f64::NAN, 0.1, "velocity_m_s NaN"),
+            ([1.0, 2.0], 0.5, -0.1, "tip_rad_s -0.1"),
+            ([1.0, 2.0], 0.5, f64::INFINITY, "tip_rad_s inf"),
         ] {
             let push = PushConfig {
                 interval_s,
@@ -852,6 +859,7 @@ mod tests {
             };
             let error = push.check().unwrap_err().to_string();
             assert!(error.starts_with("invalid [push]: "), "{error}");
+            assert!(error.contains(named), "{error} should name {named}");
         }
         PUSH.check().unwrap();
     }
