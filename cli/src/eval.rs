@@ -102,9 +102,12 @@ pub struct EvalBodyArgs {
 }
 
 impl EvalBodyArgs {
-    /// The pushes `--push-*` ask for (none when both sizes are 0). The interval is checked
-    /// even then, so that a wrong one is not passed over silently.
-    fn push(&self) -> Result<Option<PushConfig>> {
+    /// The pushes `--push-*` ask for (none when both sizes are 0: `kumi report compare`
+    /// evaluates without pushes and passes no interval).
+    pub(crate) fn push(&self) -> Result<Option<PushConfig>> {
+        if self.push_m_s == 0.0 && self.push_tip_rad_s == 0.0 {
+            return Ok(None);
+        }
         let [lo, hi] = self.push_interval_s[..] else {
             bail!("--push-interval-s takes two times, LO,HI [s]");
         };
@@ -114,8 +117,7 @@ impl EvalBodyArgs {
             tip_rad_s: self.push_tip_rad_s,
         };
         push.check().context("checking the --push-* options")?;
-        let none = self.push_m_s == 0.0 && self.push_tip_rad_s == 0.0;
-        Ok((!none).then_some(push))
+        Ok(Some(push))
     }
 }
 
@@ -135,17 +137,17 @@ pub fn run(what: EvalCommand) -> Result<()> {
 }
 
 impl EvalBodyArgs {
-    /// Checks `--episodes` and `--trace` and makes `--trace-plot`'s folder before the
+    /// Makes `--trace-plot`'s folder and checks `--episodes` and `--trace` before the
     /// evaluation, so that a bad path fails in a second instead of after the episodes.
     fn check_outputs(&self) -> Result<()> {
+        if let Some(dir) = &self.trace_plot {
+            crate::output::ensure_dir(dir)?;
+        }
         if let Some(path) = &self.episodes {
             crate::output::check_file(path, "--episodes")?;
         }
         if let Some(path) = &self.trace {
             crate::output::check_file(path, "--trace")?;
-        }
-        if let Some(dir) = &self.trace_plot {
-            crate::output::ensure_dir(dir)?;
         }
         Ok(())
     }
@@ -170,7 +172,6 @@ fn shown(path: &std::path::Path) -> String {
 }
 
 fn run_whole_body(args: EvalBodyArgs) -> Result<()> {
-    args.check_outputs()?;
     let results = evaluate_whole_body(&args)?;
     if let Some(path) = &args.episodes {
         write_csv(path, &results.episodes_csv(), "episodes")?;
@@ -309,6 +310,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         "--trace-plot needs at least one traced episode (--traced)"
     );
     let push = args.push()?;
+    args.check_outputs()?;
     let model = load_model(&args.morphology)?;
     let file = crate::train::read_shipped_policy_config(
         args.config.as_deref(),

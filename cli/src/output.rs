@@ -11,8 +11,9 @@ pub fn ensure_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))
 }
 
-/// Checks that a file can be written at `path` later: its folder exists and `path` is not a
-/// folder. What `what` is (`--episodes`) goes into the error. Nothing is created.
+/// Checks that `path` can name a file to write later: its folder exists and `path` is not a
+/// folder (permissions are not checked). What `what` is (`--episodes`) goes into the error.
+/// Nothing is created.
 pub fn check_file(path: &Path, what: &str) -> Result<()> {
     if path.is_dir() {
         bail!("{what} {}: is a folder, not a file", path.display());
@@ -23,7 +24,7 @@ pub fn check_file(path: &Path, what: &str) -> Result<()> {
     };
     if !parent.is_dir() {
         bail!(
-            "{what} {}: the folder {} does not exist",
+            "{what} {}: {} is not an existing folder",
             path.display(),
             parent.display()
         );
@@ -57,7 +58,7 @@ mod tests {
         let missing = dir.join("nope").join("episodes.csv");
         let e = check_file(&missing, "--episodes").unwrap_err().to_string();
         assert!(
-            e.contains("--episodes") && e.contains("does not exist"),
+            e.contains("--episodes") && e.contains("not an existing folder"),
             "{e}"
         );
         let e = check_file(&dir, "--trace").unwrap_err().to_string();

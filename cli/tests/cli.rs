@@ -690,7 +690,7 @@ fn a_bad_output_path_is_refused_before_any_episode_runs() {
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        stderr.contains("--episodes") && stderr.contains("does not exist"),
+        stderr.contains("--episodes") && stderr.contains("not an existing folder"),
         "{stderr}"
     );
     assert!(

@@ -94,7 +94,7 @@ impl PushConfig {
         let bad = |what: String| Err(EnvError::Settings(format!("invalid [push]: {what}")));
         if !(lo > 0.0 && hi >= lo && hi.is_finite()) {
             return bad(format!(
-                "interval_s [{lo}, {hi}] must be a range [lo, hi] of seconds with 0 < lo <= hi"
+                "interval_s [{lo}, {hi}] must be a finite range [lo, hi] of seconds with 0 < lo <= hi"
             ));
         }
         for (name, value) in [
