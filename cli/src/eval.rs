@@ -119,24 +119,7 @@ impl EvalBodyArgs {
         push.check().context("checking the --push-* options")?;
         Ok(Some(push))
     }
-}
 
-/// A finite number of at least 0.
-fn non_negative(text: &str) -> std::result::Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
-        _ => Err(format!("`{text}` is not a finite number of at least 0")),
-    }
-}
-
-pub fn run(what: EvalCommand) -> Result<()> {
-    match what {
-        EvalCommand::Arm(args) => run_arm(args),
-        EvalCommand::WholeBody(args) => run_whole_body(args),
-    }
-}
-
-impl EvalBodyArgs {
     /// Makes `--trace-plot`'s folder and checks `--episodes` and `--trace` before the
     /// evaluation, so that a bad path fails in a second instead of after the episodes.
     fn check_outputs(&self) -> Result<()> {
@@ -159,6 +142,21 @@ impl EvalBodyArgs {
         } else {
             0
         }
+    }
+}
+
+/// A finite number of at least 0.
+fn non_negative(text: &str) -> std::result::Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{text}` is not a finite number of at least 0")),
+    }
+}
+
+pub fn run(what: EvalCommand) -> Result<()> {
+    match what {
+        EvalCommand::Arm(args) => run_arm(args),
+        EvalCommand::WholeBody(args) => run_whole_body(args),
     }
 }
 
