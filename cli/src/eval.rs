@@ -337,6 +337,18 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         .get(kumi_policies::metadata::ENV_STEPS)
         .cloned()
         .unwrap_or_else(|| "?".into());
+    // A policy moved to a changed robot without retraining (`kumi policy restamp`) says so.
+    let restamped = probe
+        .metadata()
+        .get(kumi_terms::contract::TRAINED_MORPHOLOGY_FINGERPRINT)
+        .map(|trained| {
+            format!(
+                "\n- re-stamped (`kumi policy restamp`): trained on `{}` with robot fingerprint {trained}, evaluated on it as it is now ({})",
+                model.name,
+                kumi_terms::contract::morphology_fingerprint(&model)
+            )
+        })
+        .unwrap_or_default();
     drop(probe);
     let engines = if args.engine.is_empty() {
         vec![crate::engine::choose(
@@ -384,7 +396,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         results.push(result);
     }
     let header = format!(
-        "# {} {} whole-body policy: evaluation\n\n- policy: `{}` (trained for {steps} environment steps){}\n- protocol: {} episodes of {} s from a random start pose (x, y within +-{} m, any heading) to a random target (x, y within +-{} m, z in [{}, {}] m, any yaw); errors at the episode's end, over episodes that did not fall; episode seed {}\n- inference: {backend} backend\n",
+        "# {} {} whole-body policy: evaluation\n\n- policy: `{}` (trained for {steps} environment steps){}{restamped}\n- protocol: {} episodes of {} s from a random start pose (x, y within +-{} m, any heading) to a random target (x, y within +-{} m, z in [{}, {}] m, any yaw); errors at the episode's end, over episodes that did not fall; episode seed {}\n- inference: {backend} backend\n",
         model.name,
         args.variant,
         shown(&path),

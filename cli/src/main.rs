@@ -11,6 +11,7 @@ mod eval;
 mod launch;
 mod output;
 mod plot;
+mod policy;
 mod report;
 mod sim;
 mod trace_plot;
@@ -72,6 +73,11 @@ enum Command {
     Bench {
         #[command(subcommand)]
         what: bench::BenchCommand,
+    },
+    /// Operations on policy files.
+    Policy {
+        #[command(subcommand)]
+        what: policy::PolicyCommand,
     },
     /// Reports computed from the shipped configs and models.
     Report {
@@ -138,6 +144,7 @@ fn run() -> Result<()> {
         Command::Train { what } => train::run(what),
         Command::Eval { what } => eval::run(what),
         Command::Bench { what } => bench::run(what),
+        Command::Policy { what } => policy::run(what),
         Command::Report { what } => report::run(what),
     }
 }

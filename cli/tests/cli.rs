@@ -851,8 +851,10 @@ mod mujoco {
     fn the_shipped_tricycle_checkpoint_exports_the_shipped_policy() {
         // policies/checkpoints/tricycle_whole_body is the training state of the shipped policy
         // after its last stage. Resumed with that stage's config it has no step left to train
-        // and exports the shipped file byte for byte: a later stage goes on from the shipped
-        // policy itself, not from a retrained copy.
+        // and exports the shipped file: a later stage goes on from the shipped policy itself,
+        // not from a retrained copy. The shipped file was re-stamped for the robot as it is
+        // now (`kumi policy restamp`, stop 66), which appends the fingerprint it was trained
+        // on: the export is the shipped file byte for byte up to that one entry.
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
         let out_dir = std::env::temp_dir().join(format!("kumi-ckpt-{}", std::process::id()));
         let path = |p: &str| root.join(p).to_str().unwrap().to_string();
@@ -871,8 +873,15 @@ mod mujoco {
         let shipped = std::fs::read(root.join("policies/tricycle_whole_body.onnx")).unwrap();
         std::fs::remove_dir_all(&out_dir).unwrap();
         assert!(
-            exported == shipped,
+            shipped.starts_with(&exported),
             "the checkpoint exports another policy than policies/tricycle_whole_body.onnx"
+        );
+        let trained = kumi_terms::contract::TRAINED_MORPHOLOGY_FINGERPRINT;
+        let mut shipped_meta = kumi_train::export::metadata(&shipped).unwrap();
+        assert!(shipped_meta.remove(trained).is_some(), "no `{trained}`");
+        assert_eq!(
+            shipped_meta,
+            kumi_train::export::metadata(&exported).unwrap()
         );
     }
 }
@@ -920,4 +929,73 @@ fn the_example_morphology_stands_and_its_whole_body_task_builds() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(err.contains("no-such-policy.onnx"), "{err}");
+}
+
+#[test]
+fn restamp_moves_a_policy_to_its_robot_as_it_is_and_keeps_what_it_was_trained_on() {
+    use kumi_terms::contract::{MORPHOLOGY_FINGERPRINT, TRAINED_MORPHOLOGY_FINGERPRINT};
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let dir = std::env::temp_dir().join(format!("kumi-restamp-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let shipped = std::fs::read(root.join("policies/minimal_whole_body.onnx")).unwrap();
+    let current = kumi_train::export::metadata(&shipped).unwrap()[MORPHOLOGY_FINGERPRINT].clone();
+    // A policy trained on an older Minimal: loading refuses it by its fingerprint.
+    let (stale, _) =
+        kumi_train::export::restamp(&shipped, MORPHOLOGY_FINGERPRINT, "0000", "unused.key")
+            .unwrap();
+    let stale_path = dir.join("stale.onnx");
+    std::fs::write(&stale_path, &stale).unwrap();
+    let stale_str = stale_path.to_str().unwrap();
+    let eval = |policy: &str| {
+        kumi(&[
+            "eval",
+            "whole-body",
+            "minimal",
+            "--policy",
+            policy,
+            "--rollouts",
+            "1",
+            "--json",
+        ])
+    };
+    let refused = eval(stale_str);
+    assert!(!refused.status.success());
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains(MORPHOLOGY_FINGERPRINT),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
+
+    let out_path = dir.join("restamped.onnx");
+    let out = kumi_ok(&[
+        "policy",
+        "restamp",
+        stale_str,
+        "--out",
+        out_path.to_str().unwrap(),
+    ]);
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains(&format!("0000 -> {current}")), "{said}");
+    let meta = kumi_train::export::metadata(&std::fs::read(&out_path).unwrap()).unwrap();
+    assert_eq!(meta[MORPHOLOGY_FINGERPRINT], current);
+    assert_eq!(meta[TRAINED_MORPHOLOGY_FINGERPRINT], "0000");
+    assert!(eval(out_path.to_str().unwrap()).status.success());
+    // The original is untouched, and a current file is left as it is.
+    assert_eq!(std::fs::read(&stale_path).unwrap(), stale);
+    let again = kumi_ok(&["policy", "restamp", out_path.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&again.stdout).contains("nothing written"));
+
+    // Not a whole-body policy, and not a policy at all, are refused by name.
+    let skill = kumi(&[
+        "policy",
+        "restamp",
+        root.join("policies/arm_reach.onnx").to_str().unwrap(),
+    ]);
+    assert!(!skill.status.success());
+    assert!(String::from_utf8_lossy(&skill.stderr).contains("not a whole-body policy"));
+    let junk = dir.join("junk.onnx");
+    std::fs::write(&junk, b"not onnx at all").unwrap();
+    let junk = kumi(&["policy", "restamp", junk.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&junk.stderr).contains("is not a policy file"));
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -211,6 +211,7 @@ mod tests {
             ee_link: Some("leg1/ee".into()),
             actuators,
             home: vec![0.0; JOINTS],
+            follow_steering: false,
         }
     }
 

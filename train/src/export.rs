@@ -184,3 +184,47 @@ pub fn actor_model(
 pub fn encode(model: &ModelProto) -> Vec<u8> {
     model.encode_to_vec()
 }
+
+/// Why [`restamp`] refused a file.
+#[derive(Debug, thiserror::Error)]
+pub enum RestampError {
+    #[error("not an ONNX model: {0}")]
+    Decode(#[from] prost::DecodeError),
+    #[error("its metadata has no `{0}`")]
+    Missing(String),
+}
+
+/// An ONNX model's `metadata_props`.
+pub fn metadata(bytes: &[u8]) -> Result<std::collections::BTreeMap<String, String>, RestampError> {
+    Ok(ModelProto::decode(bytes)?
+        .metadata_props
+        .into_iter()
+        .map(|p| (p.key, p.value))
+        .collect())
+}
+
+/// An ONNX model's bytes with the metadata value of `key` replaced by `value`, the replaced
+/// value kept under `record_key` unless that key is already there (so the first value survives
+/// any number of re-stamps). Returns the new bytes and the replaced value; the graph is not
+/// touched.
+pub fn restamp(
+    bytes: &[u8],
+    key: &str,
+    value: &str,
+    record_key: &str,
+) -> Result<(Vec<u8>, String), RestampError> {
+    let mut model = ModelProto::decode(bytes)?;
+    let entry = model
+        .metadata_props
+        .iter_mut()
+        .find(|p| p.key == key)
+        .ok_or_else(|| RestampError::Missing(key.to_string()))?;
+    let old = std::mem::replace(&mut entry.value, value.to_string());
+    if !model.metadata_props.iter().any(|p| p.key == record_key) {
+        model.metadata_props.push(StringStringEntryProto {
+            key: record_key.to_string(),
+            value: old.clone(),
+        });
+    }
+    Ok((encode(&model), old))
+}

@@ -1,6 +1,6 @@
 //! The exported ONNX actor reproduces the training network's output.
 
-use kumi_train::export::{actor_model, encode, INPUT, OPSET, OUTPUT};
+use kumi_train::export::{actor_model, encode, restamp, RestampError, INPUT, OPSET, OUTPUT};
 use kumi_train::ppo::network::ActorCritic;
 use kumi_train::ppo::normalizer::RunningNorm;
 use prost::Message;
@@ -89,4 +89,47 @@ fn onnx_actor_matches_the_training_network_to_1e_5() {
         worst <= 1e-5,
         "ONNX differs from the training network by {worst}"
     );
+}
+
+#[test]
+fn restamping_replaces_one_value_keeps_the_first_and_leaves_the_graph() {
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let net = ActorCritic::<f32>::new(OBS, ACT, &[8], -0.5, &mut rng);
+    let norm = RunningNorm::new(OBS);
+    let metadata = [
+        ("kumi.format".to_string(), "test".to_string()),
+        ("robot".to_string(), "old".to_string()),
+    ]
+    .into_iter()
+    .collect();
+    let bytes = encode(&actor_model(&norm, &net.actor.parameters(), &metadata));
+    let props = |b: &[u8]| {
+        let m = tract_onnx::pb::ModelProto::decode(b).unwrap();
+        let graph = m.graph.unwrap().encode_to_vec();
+        let props: Vec<(String, String)> = m
+            .metadata_props
+            .into_iter()
+            .map(|p| (p.key, p.value))
+            .collect();
+        (props, graph)
+    };
+    let (once, old) = restamp(&bytes, "robot", "new", "robot.trained").unwrap();
+    assert_eq!(old, "old");
+    let (twice, old) = restamp(&once, "robot", "newer", "robot.trained").unwrap();
+    assert_eq!(old, "new");
+    let (before, graph) = props(&bytes);
+    let (after, graph_after) = props(&twice);
+    assert_eq!(graph, graph_after, "the graph is not touched");
+    assert_eq!(before.len() + 1, after.len());
+    let get = |k: &str| after.iter().find(|(key, _)| key == k).unwrap().1.clone();
+    assert_eq!(get("robot"), "newer");
+    assert_eq!(get("robot.trained"), "old", "the first value survives");
+    assert!(matches!(
+        restamp(&bytes, "no.such.key", "x", "y"),
+        Err(RestampError::Missing(k)) if k == "no.such.key"
+    ));
+    assert!(matches!(
+        restamp(b"not onnx at all", "robot", "x", "y"),
+        Err(RestampError::Decode(_))
+    ));
 }

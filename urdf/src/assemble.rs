@@ -28,6 +28,9 @@ pub struct ModuleInstance {
     pub actuators: Vec<Actuator>,
     /// Home position [rad] of each position actuator, in order.
     pub home: Vec<f64>,
+    /// The wheels roll with the joint the module hangs from
+    /// ([`RobotModel::steering_couplings`]); the morphology's `follow_steering`.
+    pub follow_steering: bool,
 }
 
 impl ModuleInstance {
@@ -88,15 +91,9 @@ impl RobotModel {
         let Some(wheel) = m.velocity_joints().next() else {
             return 1.0;
         };
-        let Ok(tree) = crate::kinematics::KinematicTree::new(&self.urdf) else {
+        let Some((tree, poses)) = self.home_link_poses() else {
             return 1.0;
         };
-        let home = self.modules.iter().flat_map(|m| {
-            m.position_joints()
-                .zip(&m.home)
-                .map(|(a, q)| (a.joint.as_str(), *q))
-        });
-        let poses = tree.forward(&Isometry3::identity(), &tree.positions(home));
         let Some(j) = tree.joint_index(&wheel.joint).map(|i| &tree.joints()[i]) else {
             return 1.0;
         };
@@ -107,6 +104,20 @@ impl RobotModel {
         } else {
             1.0
         }
+    }
+
+    /// The kinematic tree and every link's pose in the base frame with every module at home.
+    pub(crate) fn home_link_poses(
+        &self,
+    ) -> Option<(crate::kinematics::KinematicTree, Vec<Isometry3<f64>>)> {
+        let tree = crate::kinematics::KinematicTree::new(&self.urdf).ok()?;
+        let home = self.modules.iter().flat_map(|m| {
+            m.position_joints()
+                .zip(&m.home)
+                .map(|(a, q)| (a.joint.as_str(), *q))
+        });
+        let poses = tree.forward(&Isometry3::identity(), &tree.positions(home));
+        Some((tree, poses))
     }
 
     pub fn module(&self, name: &str) -> Option<&ModuleInstance> {
@@ -268,6 +279,7 @@ pub fn assemble(morphology: &Morphology, library: &ModuleLibrary) -> RobotModel 
             ee_link: module.ee_link.as_deref().map(p),
             actuators,
             home: entry.home.clone(),
+            follow_steering: entry.follow_steering,
         });
     }
 

@@ -9,6 +9,69 @@ use crate::{Actuator, ActuatorMode};
 /// Policies act once per control step; an increment is a change per control step.
 pub const CONTROL_HZ: f64 = 30.0;
 
+/// The rate [rad/s] a new position command asks for: its change from the previous command over
+/// the time since that one [s], clamped to the joint's velocity limit (the set-point moves no
+/// faster). `None` when no time has passed (two commands in one instant).
+pub fn command_rate(
+    previous: f64,
+    command: f64,
+    elapsed_s: f64,
+    velocity_limit: f64,
+) -> Option<f64> {
+    (elapsed_s > 0.0)
+        .then(|| ((command - previous) / elapsed_s).clamp(-velocity_limit, velocity_limit))
+}
+
+/// The commanded rate of a position joint as its commands come (what a wheel that follows the
+/// joint's steering rolls with, [`crate::RobotModel::steering_couplings`]): each command's
+/// [`command_rate`] over the time since the one before, held for that long, so a joint whose
+/// commands stop has no rate one period later. Time passes by [`Self::elapse`]: physics steps in
+/// the simulator's servos, wall time in the whole-body node on hardware.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CommandRate {
+    /// The latest command's rate [rad/s].
+    rate: f64,
+    /// How long it holds [s]: the time since the command before it.
+    window_s: f64,
+    /// Time since the latest command [s].
+    since_s: f64,
+}
+
+impl CommandRate {
+    /// A new command `command` after `previous` [rad], for a joint of `velocity_limit` [rad/s].
+    /// The first command (no time since the last reset) and a second command in the same
+    /// instant set no rate.
+    pub fn command(&mut self, previous: f64, command: f64, velocity_limit: f64) {
+        if let Some(rate) = command_rate(previous, command, self.since_s, velocity_limit) {
+            self.rate = rate;
+            self.window_s = self.since_s;
+        }
+        self.since_s = 0.0;
+    }
+
+    /// `dt_s` [s] pass.
+    pub fn elapse(&mut self, dt_s: f64) {
+        self.since_s += dt_s;
+    }
+
+    /// The rate now [rad/s]: the latest command's while its window lasts, else 0.
+    pub fn rate(&self) -> f64 {
+        if self.since_s < self.window_s {
+            self.rate
+        } else {
+            0.0
+        }
+    }
+}
+
+/// A wheel's velocity [rad/s] when it follows its module's steering: its command [rad/s] plus
+/// `gain` times the steering joint's commanded rate [rad/s] ([`CommandRate`]), within its
+/// velocity limit. The simulator's servos apply it each physics step, the whole-body node on
+/// hardware each time it sends the wheels.
+pub fn follow_steering(actuator: &Actuator, command: f64, gain: f64, steering_rate: f64) -> f64 {
+    (command + gain * steering_rate).clamp(-actuator.velocity_limit, actuator.velocity_limit)
+}
+
 /// Clamps a raw command to the actuator's limits; `None` for a non-finite command.
 pub fn clamp_command(actuator: &Actuator, command: f64) -> Option<f64> {
     if !command.is_finite() {
@@ -67,6 +130,42 @@ pub fn apply_increments(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_commanded_rate_holds_for_the_period_it_was_spread_over() {
+        let mut r = CommandRate::default();
+        // The first command has nothing before it.
+        r.command(0.0, 0.0, 1.5);
+        assert_eq!(r.rate(), 0.0);
+        // 0.01 rad in 1/30 s (four steps of 1/120 s): 0.3 rad/s for four steps, then none.
+        let dt = 1.0 / 120.0;
+        (0..4).for_each(|_| r.elapse(dt));
+        r.command(0.0, 0.01, 1.5);
+        for step in 0..4 {
+            assert!((r.rate() - 0.3).abs() < 1e-12, "{step}");
+            r.elapse(dt);
+        }
+        assert_eq!(r.rate(), 0.0);
+        // A command in the same instant as the last keeps the rate it had.
+        r.command(0.01, 0.02, 1.5);
+        (0..4).for_each(|_| r.elapse(dt));
+        r.command(0.02, 0.02, 1.5);
+        r.command(0.02, 0.5, 1.5);
+        assert_eq!(
+            r.rate(),
+            0.0,
+            "no change over the last period, none for the jump in no time"
+        );
+    }
+
+    #[test]
+    fn a_command_rate_is_the_change_over_the_time_since_the_last_command() {
+        // 0.01 rad over 1/30 s is 0.3 rad/s.
+        assert!((command_rate(0.5, 0.51, 1.0 / 30.0, 1.5).unwrap() - 0.3).abs() < 1e-12);
+        // A jump of 1 rad in 1/30 s is limited to 1.5 rad/s.
+        assert_eq!(command_rate(0.0, -1.0, 1.0 / 30.0, 1.5), Some(-1.5));
+        assert_eq!(command_rate(0.0, 1.0, 0.0, 1.5), None);
+    }
 
     fn arm_joint() -> Actuator {
         Actuator {

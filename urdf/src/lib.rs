@@ -15,6 +15,7 @@ mod module;
 mod morphology;
 mod physics;
 pub mod pose;
+mod steering;
 
 pub use assemble::{assemble, unprefixed, ModuleInstance, RobotModel};
 pub use catalog::{load_morphology, shipped_morphologies, ModuleLibrary, SHIPPED_MORPHOLOGIES};
@@ -22,3 +23,4 @@ pub use error::{ModelError, Problem};
 pub use module::{Actuator, ActuatorMode, Connector, ContactMaterial, Module};
 pub use morphology::{Morphology, MorphologyModule, Mount, Role};
 pub use physics::{Layout, PhysicsSettings};
+pub use steering::{rolling_gain, SteeringCoupling};

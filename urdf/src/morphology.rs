@@ -71,6 +71,10 @@ pub struct MorphologyModule {
     /// Factor on every joint's torque limit (URDF `<limit effort>`) of this module: a module
     /// built with a stronger gearbox than its kind's default. 1 unless the file says otherwise.
     pub effort_scale: f64,
+    /// A wheel module mounted below a joint that steers it: its wheels roll with that joint
+    /// ([`crate::RobotModel::steering_couplings`]) instead of being dragged sideways. False
+    /// unless the file says otherwise.
+    pub follow_steering: bool,
 }
 
 /// A validated morphology.
@@ -109,6 +113,8 @@ struct RawModule {
     #[serde(default)]
     options: Vec<String>,
     effort_scale: Option<f64>,
+    #[serde(default)]
+    follow_steering: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -296,6 +302,23 @@ impl Morphology {
                     })
                 }
             };
+            if m.follow_steering
+                && (module
+                    .actuators
+                    .iter()
+                    .all(|a| a.mode != crate::ActuatorMode::Velocity)
+                    || mount.is_none())
+            {
+                return Err(ModelError::new(
+                    file,
+                    at("follow_steering"),
+                    Problem::BadValue(format!(
+                        "only a mounted module with wheels can follow its steering; `{mname}` is a \
+                         {} `{kind}` module",
+                        if mount.is_none() { "root" } else { "wheel-less" }
+                    )),
+                ));
+            }
             modules.push(MorphologyModule {
                 name: mname,
                 kind,
@@ -304,6 +327,7 @@ impl Morphology {
                 home,
                 options: m.options,
                 effort_scale,
+                follow_steering: m.follow_steering,
             });
         }
         validate_tree(file, &modules, library)?;

@@ -333,3 +333,62 @@ fn an_effort_scale_multiplies_that_modules_torque_limits_only() {
         assert!(err.to_string().contains("torque-limit factor"), "{err}");
     }
 }
+
+#[test]
+fn follow_steering_is_refused_on_a_module_without_wheels_or_without_a_mount() {
+    let err = parse(&BASE.replace(
+        "role = \"manipulator\"",
+        "role = \"manipulator\"\nfollow_steering = true",
+    ));
+    assert_eq!(err.field, "module[1].follow_steering");
+    assert!(err.to_string().contains("wheel-less `arm` module"), "{err}");
+    let err = parse(&BASE.replace(
+        "role = \"wheel\"",
+        "role = \"wheel\"\nfollow_steering = true",
+    ));
+    assert_eq!(err.field, "module[0].follow_steering");
+    assert!(err.to_string().contains("root `wheel` module"), "{err}");
+    let err = parse(&BASE.replace(
+        "role = \"wheel\"",
+        "role = \"wheel\"\nfollow_steering = \"yes\"",
+    ));
+    assert!(err.to_string().contains("expected a boolean"), "{err}");
+}
+
+#[test]
+fn a_wheel_module_on_a_legs_tip_may_follow_its_steering() {
+    let text = r#"
+name = "cart"
+[[module]]
+name = "hub"
+kind = "hub"
+role = "body"
+[[module]]
+name = "leg"
+kind = "arm"
+role = "leg"
+mount = { parent = "hub", connector = "side0" }
+home = [0.0, 0.0, 0.0, 1.5707963267948966, 0.0, 0.0, 0.0]
+[[module]]
+name = "w"
+kind = "wheel"
+role = "wheel"
+mount = { parent = "leg", connector = "tip" }
+follow_steering = true
+"#;
+    let library = ModuleLibrary::shipped();
+    let model = kumi_model::assemble(&Morphology::parse(FILE, text, &library).unwrap(), &library);
+    let couplings = model.steering_couplings();
+    assert_eq!(couplings.len(), 2, "{couplings:?}");
+    assert!(couplings.iter().all(|c| c.steering_joint == "leg/joint7"));
+    // The two wheels roll opposite ways, by half the track over the radius.
+    assert!((couplings[0].gain + couplings[1].gain).abs() < 1e-9);
+    assert!((couplings[0].gain.abs() - 0.286 / 0.27).abs() < 1e-9);
+    // Without the key, the same robot has none.
+    let plain = text.replace("follow_steering = true\n", "");
+    let model = kumi_model::assemble(
+        &Morphology::parse(FILE, &plain, &library).unwrap(),
+        &library,
+    );
+    assert!(model.steering_couplings().is_empty());
+}

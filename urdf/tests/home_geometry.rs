@@ -118,3 +118,26 @@ fn the_fixed_arm_tool_points_up_at_zero_and_its_x_axis_is_the_arm_axis() {
         ee.translation.vector
     );
 }
+
+#[test]
+fn tricycles_wheels_follow_their_legs_tip_rolls_and_the_others_have_no_couplings() {
+    let tricycle = model("tricycle");
+    let couplings = tricycle.steering_couplings();
+    assert_eq!(couplings.len(), 6, "{couplings:?}");
+    for c in &couplings {
+        let leg = c.wheel_joint.replace("wheel", "leg");
+        let leg = leg.split('/').next().unwrap();
+        assert_eq!(c.steering_joint, format!("{leg}/joint7"), "{c:?}");
+        // Half the track (0.286 m) over the tyre radius (0.27 m), the left wheel forward when
+        // the roll is positive: the tip roll's axis points down the leg's last link.
+        let expected = if c.wheel_joint.ends_with("wheel_left") {
+            0.286 / 0.27
+        } else {
+            -0.286 / 0.27
+        };
+        assert!((c.gain - expected).abs() < 1e-9, "{c:?}");
+    }
+    for other in ["minimal", "dragon"] {
+        assert!(model(other).steering_couplings().is_empty(), "{other}");
+    }
+}

@@ -195,6 +195,7 @@ mod tests {
                 })
                 .collect(),
             home: vec![0.0; JOINTS],
+            follow_steering: false,
         }
     }
 

@@ -9,11 +9,14 @@
 //!   [`kumi_terms::observation::build`] (the function training uses), the policy, and the
 //!   commands by [`kumi_terms::ActionTerms::commands`]; or a hold and why.
 //! - [`report`]: what it reports on `/diagnostics`.
+//! - [`steering`]: on hardware, wheels that follow their legs' steering commands, as the
+//!   simulator's servos roll them.
 //! - [`run`]: the ROS 2 shell around them.
 
 pub mod controller;
 pub mod report;
 pub mod run;
+pub mod steering;
 pub mod target;
 pub mod tick;
 

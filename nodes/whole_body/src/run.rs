@@ -14,6 +14,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use kumi_model::commands::wheel_joint_velocities;
+
+use crate::steering::SteeringRates;
 use kumi_model::RobotModel;
 use kumi_msgs::builtin_interfaces::Time;
 use kumi_msgs::diagnostic_msgs::DiagnosticArray;
@@ -161,8 +163,18 @@ struct Io {
     joint_states: Vec<(StrictSubscription<JointState>, String, Vec<String>)>,
     goals: Vec<(String, String, Publisher<PoseStamped>)>,
     wheels: Vec<(String, WheelOutput)>,
+    /// On hardware, per module with a steering joint its wheels follow: its limb's `joint_set`
+    /// (the arm node's commands).
+    steering: Vec<SteeringInput>,
     tool_pose: Publisher<PoseStamped>,
     diagnostics: Publisher<DiagnosticArray>,
+}
+
+/// A limb's `joint_set` (the arm node's commands) and the steering joints read from it, by
+/// their model and limb names.
+struct SteeringInput {
+    commands: StrictSubscription<JointState>,
+    joints: Vec<(String, String)>,
 }
 
 /// Messages taken per subscription per loop: a flood cannot keep the node from acting.
@@ -231,6 +243,29 @@ fn open_io(
         };
         wheels.push((wheel.module.clone(), output));
     }
+    let mut steering = Vec::new();
+    if let Some(p) = hardware {
+        let steered = SteeringRates::new(&config.model);
+        for module in &config.model.modules {
+            let joints: Vec<(String, String)> = steered
+                .joints()
+                .filter(|j| kumi_model::unprefixed(&module.name, j).is_some())
+                .map(|j| {
+                    (
+                        j.to_string(),
+                        p.joint_name(&module.name, unprefixed(&module.name, j)),
+                    )
+                })
+                .collect();
+            if !joints.is_empty() {
+                let topic = p.joint_set(&module.name);
+                steering.push(SteeringInput {
+                    commands: node.strict_subscription(&topic, qos::default())?,
+                    joints,
+                });
+            }
+        }
+    }
     let odom = match hardware {
         Some(p) => p.odometry.clone().ok_or_else(|| WholeBodyNodeError::Robot {
             robot: config.robot.clone(),
@@ -244,6 +279,7 @@ fn open_io(
         joint_states,
         goals,
         wheels,
+        steering,
         tool_pose: node.publisher(&topics::tool_pose(robot), qos::default())?,
         diagnostics: node.publisher(topics::DIAGNOSTICS, qos::default())?,
     })
@@ -272,16 +308,31 @@ fn unprefixed<'a>(module: &str, joint: &'a str) -> &'a str {
     kumi_model::unprefixed(module, joint).unwrap_or(joint)
 }
 
-/// Publishes a decision: wheel velocities first, then the goals stamped with the tick.
-fn publish(io: &Io, model: &RobotModel, decision: &Decision, stamp: Time, odom_frame: &str) {
+/// Publishes a decision: wheel velocities first, then the goals stamped with the tick. On
+/// hardware, wheels that follow their steering add its commanded rate at `following`'s time
+/// [s] (`None`: they do not, as when the node stops them on its way out).
+fn publish(
+    io: &Io,
+    model: &RobotModel,
+    decision: &Decision,
+    stamp: Time,
+    odom_frame: &str,
+    following: Option<(&mut SteeringRates, f64)>,
+) {
+    let mut following = following;
     for ((module, output), (_, v)) in io.wheels.iter().zip(&decision.wheel_velocities) {
         match output {
             WheelOutput::Bridge(publisher) => {
                 let _ = publisher.publish(Float64 { data: *v });
             }
             WheelOutput::Limb { publisher, joints } => {
-                // The one wheel rule (sign by mounting, clamp), then each joint by its name.
-                let Some(velocities) = wheel_joint_velocities(model, module, *v) else {
+                // The one wheel rule (sign by mounting, clamp; following the steering as the
+                // simulator's servos do), then each joint by its name.
+                let velocities = match following.as_mut() {
+                    Some((rates, now_s)) => rates.wheel_velocities(model, module, *v, *now_s),
+                    None => wheel_joint_velocities(model, module, *v),
+                };
+                let Some(velocities) = velocities else {
                     continue;
                 };
                 let _ = publisher.publish(JointState {
@@ -376,6 +427,13 @@ pub fn run(
         node.domain_id(),
         topics::robot_goal_pose(robot)
     );
+    let mut steering = SteeringRates::new(&config.model);
+    if config.hardware.is_some() && !steering.is_empty() {
+        info!(
+            "wheels follow their steering (`follow_steering`): reading {} on the limbs' joint_set",
+            steering.joints().collect::<Vec<_>>().join(", ")
+        );
+    }
     match controller.tilt_limit_rad() {
         Some(limit) => {
             info!("stops driving if the base tilts past {limit:.3} rad, until a new target")
@@ -498,6 +556,34 @@ pub fn run(
             }
         }
 
+        for input in &io.steering {
+            for _ in 0..MAX_TAKEN {
+                match input.commands.take() {
+                    None => break,
+                    Some(Ok((msg, _))) => {
+                        for (joint, limb_name) in &input.joints {
+                            let position = msg
+                                .name
+                                .iter()
+                                .position(|n| n == limb_name)
+                                .and_then(|k| msg.position.get(k));
+                            if let Some(&q) = position {
+                                if !steering.command(joint, q, now_s) {
+                                    report.joint_states_rejected += 1;
+                                }
+                            }
+                        }
+                    }
+                    Some(Err(why)) => {
+                        report.malformed += 1;
+                        if log.check(Instant::now()).is_some() {
+                            warn!("refused a malformed steering command: {why}");
+                        }
+                    }
+                }
+            }
+        }
+
         // Motion Stack publishes `joint_read` only on change: while a limb's publisher is alive
         // its last joint state still holds.
         if config.hardware.is_some() && liveliness_at.elapsed() >= Duration::from_millis(100) {
@@ -570,7 +656,15 @@ pub fn run(
                     info!("tool {p:.3} m and {y:.2} rad from the target");
                 }
             }
-            publish(&io, &config.model, &decision, stamp, &odom_frame);
+            let now_s = start.elapsed().as_secs_f64();
+            publish(
+                &io,
+                &config.model,
+                &decision,
+                stamp,
+                &odom_frame,
+                Some((&mut steering, now_s)),
+            );
             if decision.action.is_some() {
                 report.latency(odometry_age_s + decided_at.elapsed().as_secs_f64());
             }
@@ -601,6 +695,7 @@ pub fn run(
         &stop,
         last_odom_stamp.unwrap_or_default(),
         &odom_frame,
+        None,
     );
     info!("whole-body node /{robot} stopping (wheels stopped)");
     Ok(())

@@ -14,8 +14,11 @@ use crate::observation::{self, ObservationOptions};
 pub const WHOLE_BODY_FORMAT: &str = "kumi-policy/whole-body/1";
 
 pub const MORPHOLOGY: &str = "kumi.morphology";
-/// Fingerprint of the assembled robot (URDF, module roles and home angles).
+/// Fingerprint of the assembled robot (URDF, module roles and home angles, steering couplings).
 pub const MORPHOLOGY_FINGERPRINT: &str = "kumi.morphology_fingerprint";
+/// The robot fingerprint a policy was trained on, kept when `kumi policy restamp` moves it to a
+/// changed robot without retraining (absent from files that were not re-stamped).
+pub const TRAINED_MORPHOLOGY_FINGERPRINT: &str = "kumi.trained_morphology_fingerprint";
 /// Fingerprint of the frozen skill's ONNX file the policy was trained over ([`NO_SKILL`] for
 /// the flat baseline).
 pub const SKILL_FINGERPRINT: &str = "kumi.skill_fingerprint";
@@ -77,11 +80,19 @@ impl ContractMismatch {
     }
 }
 
-/// A robot's fingerprint: its URDF and each module's name, role and home angles.
+/// A robot's fingerprint: its URDF, each module's name, role and home angles, and its wheels'
+/// steering couplings (none for robots without `follow_steering`, whose fingerprints are what
+/// they were before couplings existed).
 pub fn morphology_fingerprint(model: &RobotModel) -> String {
     let mut text = model.urdf_xml();
     for m in &model.modules {
         text.push_str(&format!("\n{}:{}:{:?}", m.name, m.role, m.home));
+    }
+    for c in model.steering_couplings() {
+        text.push_str(&format!(
+            "\nsteer:{}<-{}:{:.9}",
+            c.wheel_joint, c.steering_joint, c.gain
+        ));
     }
     metadata::fingerprint(&text)
 }

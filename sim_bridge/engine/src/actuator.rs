@@ -3,6 +3,7 @@
 //! meaning of increments, the control rate) belong to the robot model
 //! ([`kumi_model::commands`]), so that nodes on hardware use them without a simulator.
 
+use kumi_model::commands::CommandRate;
 use kumi_model::{Actuator, ActuatorMode};
 
 /// The command a driven joint is following.
@@ -14,6 +15,11 @@ pub struct ServoState {
     /// `command` at no more than the velocity limit. For velocity servos, the integrated
     /// wheel angle it holds [rad].
     pub setpoint: f64,
+    /// Position servos: the commanded rate, what a wheel following this joint's steering rolls
+    /// with ([`CommandRate`]). Unused by velocity servos.
+    pub command_rate: CommandRate,
+    /// The commanded rate [rad/s] during the current physics step (position servos).
+    pub rate_now: f64,
 }
 
 impl ServoState {
@@ -25,6 +31,8 @@ impl ServoState {
                 ActuatorMode::Velocity => 0.0,
             },
             setpoint: q,
+            command_rate: CommandRate::default(),
+            rate_now: 0.0,
         }
     }
 }

@@ -7,7 +7,7 @@ use kumi_model::{Actuator, ActuatorMode, RobotModel};
 
 use crate::actuator::{integrate_velocity_setpoint, max_lead, slew, ServoState};
 use crate::error::SimError;
-use kumi_model::commands::clamp_command;
+use kumi_model::commands::{clamp_command, follow_steering};
 
 /// Every actuator of a robot with its servo state, in the model's actuator order.
 #[derive(Debug, Clone, PartialEq)]
@@ -18,6 +18,9 @@ pub struct ServoBank {
     modules: Vec<(String, Range<usize>)>,
     /// Each module's [`RobotModel::wheel_drive_sign`], in the order of `modules`.
     drive_signs: Vec<f64>,
+    /// Per actuator: the steering joint a wheel follows and its gain
+    /// ([`RobotModel::steering_couplings`]); `None` for every other joint.
+    steering: Vec<Option<(usize, f64)>>,
 }
 
 /// What the PD law of one servo tracks during one physics step.
@@ -43,7 +46,18 @@ impl ServoBank {
             .iter()
             .map(|a| ServoState::holding(a.mode, 0.0))
             .collect();
+        let index = |joint: &str| actuators.iter().position(|a| a.joint == joint);
+        let mut steering = vec![None; actuators.len()];
+        for c in model.steering_couplings() {
+            if let (Some(wheel), Some(steer)) = (index(&c.wheel_joint), index(&c.steering_joint)) {
+                // Parents come first, so the steering joint advances before its wheels in each
+                // physics step and they read this step's rate.
+                assert!(steer < wheel, "a steering joint precedes its wheels");
+                steering[wheel] = Some((steer, c.gain));
+            }
+        }
         Self {
+            steering,
             actuators,
             states,
             modules,
@@ -145,7 +159,12 @@ impl ServoBank {
             })
             .collect::<Result<Vec<f64>, SimError>>()?;
         for (&i, v) in indices.iter().zip(clamped) {
-            self.states[i].command = v;
+            let s = &mut self.states[i];
+            if mode == ActuatorMode::Position {
+                let limit = self.actuators[i].velocity_limit;
+                s.command_rate.command(s.command, v, limit);
+            }
+            s.command = v;
         }
         Ok(())
     }
@@ -166,12 +185,17 @@ impl ServoBank {
     /// Advances servo `i`'s set-point by one physics step of `dt` [s], given its measured
     /// position `q` [rad], and returns what its PD law tracks during that step. Position
     /// set-points slew toward the command at the velocity limit; wheel set-points integrate the
-    /// velocity command without winding up.
+    /// velocity command without winding up. A wheel that follows its module's steering adds
+    /// `gain * rate` of its steering joint (advanced earlier in the same physics step), within
+    /// its velocity limit.
     pub fn advance(&mut self, i: usize, q: f64, dt: f64) -> ServoTarget {
+        let following = self.steering[i].map(|(j, gain)| (gain, self.states[j].rate_now));
         let a = &self.actuators[i];
         let s = &mut self.states[i];
         match a.mode {
             ActuatorMode::Position => {
+                s.rate_now = s.command_rate.rate();
+                s.command_rate.elapse(dt);
                 s.setpoint = slew(s.setpoint, s.command, a.velocity_limit, dt);
                 ServoTarget {
                     position: s.setpoint,
@@ -179,10 +203,131 @@ impl ServoBank {
                 }
             }
             ActuatorMode::Velocity => {
-                s.setpoint = integrate_velocity_setpoint(s.setpoint, s.command, q, max_lead(a), dt);
+                let velocity = following.map_or(s.command, |(gain, rate)| {
+                    follow_steering(a, s.command, gain, rate)
+                });
+                s.setpoint = integrate_velocity_setpoint(s.setpoint, velocity, q, max_lead(a), dt);
                 ServoTarget {
                     position: s.setpoint,
-                    velocity: s.command,
+                    velocity,
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::home_joint_positions;
+    use kumi_model::{assemble, load_morphology, ModuleLibrary};
+
+    fn model(name: &str) -> RobotModel {
+        let library = ModuleLibrary::shipped();
+        assemble(&load_morphology(name, &library).unwrap(), &library)
+    }
+
+    /// Advances every servo one physics step of `dt` [s] at the joint positions `q`, in
+    /// actuator order as the engines do; returns each servo's target.
+    fn physics_step(bank: &mut ServoBank, q: &[f64], dt: f64) -> Vec<ServoTarget> {
+        (0..q.len()).map(|i| bank.advance(i, q[i], dt)).collect()
+    }
+
+    #[test]
+    fn a_wheel_follows_its_steering_commands_rate_for_one_command_period() {
+        let model = model("tricycle");
+        let mut bank = ServoBank::new(&model);
+        let q = home_joint_positions(&model);
+        bank.hold(&q);
+        let actuators = bank.actuators().to_vec();
+        let index = |joint: &str| actuators.iter().position(|a| a.joint == joint).unwrap();
+        let (roll, left, right) = (
+            index("leg0/joint7"),
+            index("wheel0/wheel_left"),
+            index("wheel0/wheel_right"),
+        );
+        let gain = 0.286 / 0.27;
+        let sign = bank.drive_sign("wheel0").unwrap();
+        // 30 Hz commands, 4 physics steps each.
+        let dt = 1.0 / 120.0;
+        let command = |bank: &mut ServoBank, roll_rad: f64| {
+            let mut targets = q[bank.module_range("leg0").unwrap()].to_vec();
+            targets[6] = roll_rad;
+            bank.set("leg0", ActuatorMode::Position, &targets).unwrap();
+            bank.set("wheel0", ActuatorMode::Velocity, &[sign * 1.0, sign * 1.0])
+                .unwrap();
+        };
+        // The first command after holding has no previous period: the wheels roll straight.
+        command(&mut bank, q[roll]);
+        for _ in 0..4 {
+            let t = physics_step(&mut bank, &q, dt);
+            assert_eq!((t[left].velocity, t[right].velocity), (sign, sign));
+        }
+        // 0.01 rad more after 1/30 s: 0.3 rad/s of roll, for 1/30 s.
+        command(&mut bank, q[roll] + 0.01);
+        for step in 0..4 {
+            let t = physics_step(&mut bank, &q, dt);
+            assert!(
+                (t[left].velocity - (sign + gain * 0.3)).abs() < 1e-9,
+                "{step}"
+            );
+            assert!(
+                (t[right].velocity - (sign - gain * 0.3)).abs() < 1e-9,
+                "{step}"
+            );
+        }
+        // No new command: the following stops one period later; the drive command holds.
+        let t = physics_step(&mut bank, &q, dt);
+        assert_eq!((t[left].velocity, t[right].velocity), (sign, sign));
+        // Other wheel modules do not follow leg0.
+        assert_eq!(t[index("wheel1/wheel_left")].velocity, 0.0);
+    }
+
+    #[test]
+    fn a_following_wheel_stays_within_its_velocity_limit() {
+        let model = model("tricycle");
+        let mut bank = ServoBank::new(&model);
+        let q = home_joint_positions(&model);
+        bank.hold(&q);
+        let left = bank
+            .actuators()
+            .iter()
+            .position(|a| a.joint == "wheel0/wheel_left")
+            .unwrap();
+        let limit = bank.actuators()[left].velocity_limit;
+        let sign = bank.drive_sign("wheel0").unwrap();
+        bank.set(
+            "wheel0",
+            ActuatorMode::Velocity,
+            &[sign * 10.0, sign * 10.0],
+        )
+        .unwrap();
+        physics_step(&mut bank, &q, 0.01);
+        // A full-speed roll (its velocity limit) on top of a full-speed drive.
+        let mut targets = q[bank.module_range("leg0").unwrap()].to_vec();
+        targets[6] += 1.0;
+        bank.set("leg0", ActuatorMode::Position, &targets).unwrap();
+        let t = physics_step(&mut bank, &q, 0.01);
+        assert!(t[left].velocity.abs() <= limit, "{}", t[left].velocity);
+    }
+
+    #[test]
+    fn wheels_of_robots_without_follow_steering_take_their_command_alone() {
+        for name in ["minimal", "dragon"] {
+            let model = model(name);
+            let mut bank = ServoBank::new(&model);
+            let q = home_joint_positions(&model);
+            bank.hold(&q);
+            physics_step(&mut bank, &q, 0.01);
+            for m in model.modules.iter().filter(|m| m.kind == "arm") {
+                let mut targets = q[bank.module_range(&m.name).unwrap()].to_vec();
+                targets.iter_mut().for_each(|t| *t += 0.01);
+                bank.set(&m.name, ActuatorMode::Position, &targets).unwrap();
+            }
+            let t = physics_step(&mut bank, &q, 0.01);
+            for (a, target) in bank.actuators().iter().zip(&t) {
+                if a.mode == ActuatorMode::Velocity {
+                    assert_eq!(target.velocity, 0.0, "{name} {}", a.joint);
                 }
             }
         }

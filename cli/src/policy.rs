@@ -1,0 +1,89 @@
+//! `kumi policy`: operations on policy files.
+//!
+//! `restamp`: moves a whole-body policy to its robot as it is now, without retraining. A
+//! policy's contract carries the fingerprint of the robot it was trained on, and loading
+//! refuses it on any other. When the robot changes in a way the policy may still serve (stop
+//! 66: Tricycle's wheels came to follow their legs' steering), this writes the current
+//! fingerprint and keeps the one it was trained on under
+//! `kumi.trained_morphology_fingerprint`, so the file says both. What the policy does on the
+//! changed robot is then for `kumi eval whole-body` to measure.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use kumi_policies::metadata;
+use kumi_terms::contract::{
+    self, MORPHOLOGY, MORPHOLOGY_FINGERPRINT, TRAINED_MORPHOLOGY_FINGERPRINT, WHOLE_BODY_FORMAT,
+};
+
+#[derive(Subcommand)]
+pub enum PolicyCommand {
+    /// Stamp a whole-body policy with its robot's current fingerprint, keeping the one it was
+    /// trained on (for a robot changed after training; evaluate it afterwards).
+    Restamp(RestampArgs),
+}
+
+#[derive(Args)]
+pub struct RestampArgs {
+    /// The whole-body policy file (ONNX).
+    pub policy: PathBuf,
+    /// Write the re-stamped file here instead of over `POLICY`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(command: PolicyCommand) -> Result<()> {
+    match command {
+        PolicyCommand::Restamp(args) => restamp(args),
+    }
+}
+
+fn restamp(args: RestampArgs) -> Result<()> {
+    let path = &args.policy;
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let meta = kumi_train::export::metadata(&bytes)
+        .with_context(|| format!("{} is not a policy file", path.display()))?;
+    let format = meta.get(metadata::FORMAT).map(String::as_str);
+    if format != Some(WHOLE_BODY_FORMAT) {
+        bail!(
+            "{}: `{}` is {:?}, not a whole-body policy ({WHOLE_BODY_FORMAT})",
+            path.display(),
+            metadata::FORMAT,
+            format.unwrap_or("missing")
+        );
+    }
+    let robot = meta
+        .get(MORPHOLOGY)
+        .with_context(|| format!("{}: no `{MORPHOLOGY}` in its metadata", path.display()))?;
+    let model = crate::sim::load_model(robot)?;
+    let current = contract::morphology_fingerprint(&model);
+    let out = args.out.as_ref().unwrap_or(path);
+    crate::output::check_file(out, "--out")?;
+    if meta.get(MORPHOLOGY_FINGERPRINT) == Some(&current) {
+        println!(
+            "{}: already stamped for `{robot}` as it is now ({current}); nothing written",
+            path.display()
+        );
+        return Ok(());
+    }
+    let (stamped, old) = kumi_train::export::restamp(
+        &bytes,
+        MORPHOLOGY_FINGERPRINT,
+        &current,
+        TRAINED_MORPHOLOGY_FINGERPRINT,
+    )
+    .with_context(|| format!("re-stamping {}", path.display()))?;
+    std::fs::write(out, stamped).with_context(|| format!("writing {}", out.display()))?;
+    let trained = kumi_train::export::metadata(&std::fs::read(out)?)?
+        .remove(TRAINED_MORPHOLOGY_FINGERPRINT)
+        .unwrap_or_default();
+    println!(
+        "{}: `{MORPHOLOGY_FINGERPRINT}` {old} -> {current} (`{robot}` as it is now); trained on \
+         {trained} (`{TRAINED_MORPHOLOGY_FINGERPRINT}`). Not retrained: evaluate it with `kumi \
+         eval whole-body {robot} --policy {}`",
+        out.display(),
+        out.display()
+    );
+    Ok(())
+}
