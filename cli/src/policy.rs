@@ -13,6 +13,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use kumi_policies::metadata;
+use kumi_runtime::ModelFile;
 use kumi_terms::contract::{
     self, MORPHOLOGY, MORPHOLOGY_FINGERPRINT, TRAINED_MORPHOLOGY_FINGERPRINT, WHOLE_BODY_FORMAT,
 };
@@ -31,6 +32,10 @@ pub struct RestampArgs {
     /// Write the re-stamped file here instead of over `POLICY`.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// The robot: a shipped name or a morphology file whose `name` is the policy's (default:
+    /// the shipped robot the policy names).
+    #[arg(long)]
+    pub morphology: Option<String>,
 }
 
 pub fn run(command: PolicyCommand) -> Result<()> {
@@ -42,8 +47,10 @@ pub fn run(command: PolicyCommand) -> Result<()> {
 fn restamp(args: RestampArgs) -> Result<()> {
     let path = &args.policy;
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let meta = kumi_train::export::metadata(&bytes)
+    let file = ModelFile::decode(bytes)
+        .map_err(anyhow::Error::msg)
         .with_context(|| format!("{} is not a policy file", path.display()))?;
+    let meta = &file.metadata;
     let format = meta.get(metadata::FORMAT).map(String::as_str);
     if format != Some(WHOLE_BODY_FORMAT) {
         bail!(
@@ -56,28 +63,45 @@ fn restamp(args: RestampArgs) -> Result<()> {
     let robot = meta
         .get(MORPHOLOGY)
         .with_context(|| format!("{}: no `{MORPHOLOGY}` in its metadata", path.display()))?;
-    let model = crate::sim::load_model(robot)?;
+    let model = crate::sim::load_model(args.morphology.as_deref().unwrap_or(robot))?;
+    if &model.name != robot {
+        bail!(
+            "{}: the policy is `{robot}`'s, the morphology `{}`'s",
+            path.display(),
+            model.name
+        );
+    }
     let current = contract::morphology_fingerprint(&model);
     let out = args.out.as_ref().unwrap_or(path);
     crate::output::check_file(out, "--out")?;
     if meta.get(MORPHOLOGY_FINGERPRINT) == Some(&current) {
+        if out != path {
+            std::fs::write(out, &file.bytes)
+                .with_context(|| format!("writing {}", out.display()))?;
+        }
         println!(
-            "{}: already stamped for `{robot}` as it is now ({current}); nothing written",
-            path.display()
+            "{}: already stamped for `{robot}` as it is now ({current}); {}",
+            path.display(),
+            if out != path {
+                format!("copied to {} unchanged", out.display())
+            } else {
+                "nothing written".to_string()
+            }
         );
         return Ok(());
     }
-    let (stamped, old) = kumi_train::export::restamp(
-        &bytes,
-        MORPHOLOGY_FINGERPRINT,
-        &current,
-        TRAINED_MORPHOLOGY_FINGERPRINT,
-    )
-    .with_context(|| format!("re-stamping {}", path.display()))?;
+    let (stamped, old) = file
+        .restamp(
+            MORPHOLOGY_FINGERPRINT,
+            &current,
+            TRAINED_MORPHOLOGY_FINGERPRINT,
+        )
+        .with_context(|| format!("re-stamping {}", path.display()))?;
     std::fs::write(out, stamped).with_context(|| format!("writing {}", out.display()))?;
-    let trained = kumi_train::export::metadata(&std::fs::read(out)?)?
-        .remove(TRAINED_MORPHOLOGY_FINGERPRINT)
-        .unwrap_or_default();
+    let trained = meta
+        .get(TRAINED_MORPHOLOGY_FINGERPRINT)
+        .unwrap_or(&old)
+        .clone();
     println!(
         "{}: `{MORPHOLOGY_FINGERPRINT}` {old} -> {current} (`{robot}` as it is now); trained on \
          {trained} (`{TRAINED_MORPHOLOGY_FINGERPRINT}`). Not retrained: evaluate it with `kumi \

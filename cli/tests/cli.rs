@@ -877,12 +877,14 @@ mod mujoco {
             "the checkpoint exports another policy than policies/tricycle_whole_body.onnx"
         );
         let trained = kumi_terms::contract::TRAINED_MORPHOLOGY_FINGERPRINT;
-        let mut shipped_meta = kumi_train::export::metadata(&shipped).unwrap();
+        let meta = |b: &[u8]| {
+            kumi_runtime::ModelFile::decode(b.to_vec())
+                .unwrap()
+                .metadata
+        };
+        let mut shipped_meta = meta(&shipped);
         assert!(shipped_meta.remove(trained).is_some(), "no `{trained}`");
-        assert_eq!(
-            shipped_meta,
-            kumi_train::export::metadata(&exported).unwrap()
-        );
+        assert_eq!(shipped_meta, meta(&exported));
     }
 }
 
@@ -938,11 +940,12 @@ fn restamp_moves_a_policy_to_its_robot_as_it_is_and_keeps_what_it_was_trained_on
     let dir = std::env::temp_dir().join(format!("kumi-restamp-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let shipped = std::fs::read(root.join("policies/minimal_whole_body.onnx")).unwrap();
-    let current = kumi_train::export::metadata(&shipped).unwrap()[MORPHOLOGY_FINGERPRINT].clone();
+    let file = |b: &[u8]| kumi_runtime::ModelFile::decode(b.to_vec()).unwrap();
+    let current = file(&shipped).metadata[MORPHOLOGY_FINGERPRINT].clone();
     // A policy trained on an older Minimal: loading refuses it by its fingerprint.
-    let (stale, _) =
-        kumi_train::export::restamp(&shipped, MORPHOLOGY_FINGERPRINT, "0000", "unused.key")
-            .unwrap();
+    let (stale, _) = file(&shipped)
+        .restamp(MORPHOLOGY_FINGERPRINT, "0000", "unused.key")
+        .unwrap();
     let stale_path = dir.join("stale.onnx");
     std::fs::write(&stale_path, &stale).unwrap();
     let stale_str = stale_path.to_str().unwrap();
@@ -976,7 +979,7 @@ fn restamp_moves_a_policy_to_its_robot_as_it_is_and_keeps_what_it_was_trained_on
     ]);
     let said = String::from_utf8_lossy(&out.stdout);
     assert!(said.contains(&format!("0000 -> {current}")), "{said}");
-    let meta = kumi_train::export::metadata(&std::fs::read(&out_path).unwrap()).unwrap();
+    let meta = file(&std::fs::read(&out_path).unwrap()).metadata;
     assert_eq!(meta[MORPHOLOGY_FINGERPRINT], current);
     assert_eq!(meta[TRAINED_MORPHOLOGY_FINGERPRINT], "0000");
     assert!(eval(out_path.to_str().unwrap()).status.success());
@@ -984,6 +987,10 @@ fn restamp_moves_a_policy_to_its_robot_as_it_is_and_keeps_what_it_was_trained_on
     assert_eq!(std::fs::read(&stale_path).unwrap(), stale);
     let again = kumi_ok(&["policy", "restamp", out_path.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&again.stdout).contains("nothing written"));
+    // Another robot's morphology is refused by name.
+    let other = kumi(&["policy", "restamp", stale_str, "--morphology", "dragon"]);
+    assert!(!other.status.success());
+    assert!(String::from_utf8_lossy(&other.stderr).contains("the morphology `dragon`'s"));
 
     // Not a whole-body policy, and not a policy at all, are refused by name.
     let skill = kumi(&[

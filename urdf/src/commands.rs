@@ -37,12 +37,23 @@ pub struct CommandRate {
     since_s: f64,
 }
 
+/// The longest gap between two commands [s] whose change is spread over it (two control
+/// periods): after a longer one (a node that held, restarted or was away) the next command is
+/// taken as a first, so a stale change never rolls the wheels for the length of the gap.
+pub const MAX_COMMAND_GAP_S: f64 = 2.0 / CONTROL_HZ;
+
 impl CommandRate {
     /// A new command `command` after `previous` [rad], for a joint of `velocity_limit` [rad/s].
-    /// The first command (no time since the last reset) and a second command in the same
-    /// instant set no rate.
+    /// The first command (no time since the last reset), one after more than
+    /// [`MAX_COMMAND_GAP_S`] and a second in the same instant set no rate; a non-finite value
+    /// changes nothing.
     pub fn command(&mut self, previous: f64, command: f64, velocity_limit: f64) {
-        if let Some(rate) = command_rate(previous, command, self.since_s, velocity_limit) {
+        if !(previous.is_finite() && command.is_finite()) {
+            return;
+        }
+        if self.since_s > MAX_COMMAND_GAP_S {
+            *self = Self::default();
+        } else if let Some(rate) = command_rate(previous, command, self.since_s, velocity_limit) {
             self.rate = rate;
             self.window_s = self.since_s;
         }
@@ -69,7 +80,7 @@ impl CommandRate {
 /// velocity limit. The simulator's servos apply it each physics step, the whole-body node on
 /// hardware each time it sends the wheels.
 pub fn follow_steering(actuator: &Actuator, command: f64, gain: f64, steering_rate: f64) -> f64 {
-    (command + gain * steering_rate).clamp(-actuator.velocity_limit, actuator.velocity_limit)
+    actuator.clamp_velocity(command + gain * steering_rate)
 }
 
 /// Clamps a raw command to the actuator's limits; `None` for a non-finite command.
@@ -156,6 +167,15 @@ mod tests {
             0.0,
             "no change over the last period, none for the jump in no time"
         );
+        // After a gap of more than two periods the next command is a first: no rate.
+        (0..12).for_each(|_| r.elapse(dt));
+        r.command(0.5, 0.9, 1.5);
+        assert_eq!(r.rate(), 0.0, "a change after a gap is not spread over it");
+        // Non-finite commands change nothing.
+        (0..4).for_each(|_| r.elapse(dt));
+        r.command(0.9, f64::NAN, 1.5);
+        r.command(0.9, 0.91, 1.5);
+        assert!((r.rate() - 0.3).abs() < 1e-12);
     }
 
     #[test]

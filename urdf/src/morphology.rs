@@ -331,6 +331,7 @@ impl Morphology {
             });
         }
         validate_tree(file, &modules, library)?;
+        validate_steering(file, &modules, library)?;
         Ok(Self {
             name,
             description,
@@ -344,6 +345,35 @@ impl Morphology {
     pub fn root(&self) -> &MorphologyModule {
         &self.modules[0]
     }
+}
+
+/// Checks that a module that follows its steering hangs from a module with joints to steer it
+/// (its parent's); the gain itself comes from the geometry at assembly.
+fn validate_steering(
+    file: &str,
+    modules: &[MorphologyModule],
+    library: &ModuleLibrary,
+) -> Result<(), ModelError> {
+    for (i, m) in modules.iter().enumerate() {
+        let Some(mount) = m.mount.as_ref().filter(|_| m.follow_steering) else {
+            continue;
+        };
+        let parent = modules
+            .iter()
+            .find(|p| p.name == mount.parent)
+            .and_then(|p| library.get(&p.kind));
+        if parent.is_some_and(|p| p.position_dofs() == 0) {
+            return Err(ModelError::new(
+                file,
+                format!("module[{i}].follow_steering"),
+                Problem::BadValue(format!(
+                    "`{}` hangs from `{}`, which has no joint to steer it",
+                    m.name, mount.parent
+                )),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Checks that mounts form one tree: one root, known parents, free connectors on the parent,

@@ -353,6 +353,24 @@ fn follow_steering_is_refused_on_a_module_without_wheels_or_without_a_mount() {
         "role = \"wheel\"\nfollow_steering = \"yes\"",
     ));
     assert!(err.to_string().contains("expected a boolean"), "{err}");
+    // A wheel module on a hub has nothing to steer it.
+    let err = parse(
+        r#"
+name = "cart"
+[[module]]
+name = "hub"
+kind = "hub"
+role = "body"
+[[module]]
+name = "w"
+kind = "wheel"
+role = "wheel"
+mount = { parent = "hub", connector = "bottom" }
+follow_steering = true
+"#,
+    );
+    assert_eq!(err.field, "module[1].follow_steering");
+    assert!(err.to_string().contains("no joint to steer it"), "{err}");
 }
 
 #[test]

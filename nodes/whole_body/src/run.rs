@@ -14,8 +14,6 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use kumi_model::commands::wheel_joint_velocities;
-
-use crate::steering::SteeringRates;
 use kumi_model::RobotModel;
 use kumi_msgs::builtin_interfaces::Time;
 use kumi_msgs::diagnostic_msgs::DiagnosticArray;
@@ -33,6 +31,7 @@ use tracing::{info, warn};
 
 use crate::controller::{Decision, Hold, WholeBodyController};
 use crate::report::Report;
+use crate::steering::SteeringRates;
 use crate::target;
 use crate::tick::{BaseState, Due, ModuleState, Tick};
 
@@ -131,6 +130,15 @@ pub fn prepare(config: &WholeBodyNodeConfig) -> Result<WholeBodyController, Whol
         policy.backend(),
         config.skill.display()
     );
+    if let Some(trained) = file
+        .metadata
+        .get(kumi_terms::contract::TRAINED_MORPHOLOGY_FINGERPRINT)
+    {
+        info!(
+            "the policy was re-stamped (`kumi policy restamp`): trained on `{}` with robot fingerprint {trained}, run on it as it is now",
+            config.model.name
+        );
+    }
     let controller = WholeBodyController::new(
         &config.model,
         terms,
@@ -308,9 +316,8 @@ fn unprefixed<'a>(module: &str, joint: &'a str) -> &'a str {
     kumi_model::unprefixed(module, joint).unwrap_or(joint)
 }
 
-/// Publishes a decision: wheel velocities first, then the goals stamped with the tick. On
-/// hardware, wheels that follow their steering add its commanded rate at `following`'s time
-/// [s] (`None`: they do not, as when the node stops them on its way out).
+/// Publishes a decision: wheel velocities first ([`publish_wheels`]), then the goals stamped
+/// with the tick.
 fn publish(
     io: &Io,
     model: &RobotModel,
@@ -319,8 +326,21 @@ fn publish(
     odom_frame: &str,
     following: Option<(&mut SteeringRates, f64)>,
 ) {
-    let mut following = following;
-    for ((module, output), (_, v)) in io.wheels.iter().zip(&decision.wheel_velocities) {
+    publish_wheels(io, model, &decision.wheel_velocities, stamp, following);
+    publish_goals(io, decision, stamp, odom_frame);
+}
+
+/// Sends each wheel module its velocity [rad/s] (`(module, v)`, in the order of `io.wheels`).
+/// On hardware, wheels that follow their steering add its commanded rate at `following`'s
+/// time [s] (`None`: they do not, as when the node stops them on its way out).
+fn publish_wheels(
+    io: &Io,
+    model: &RobotModel,
+    wheel_velocities: &[(String, f64)],
+    stamp: Time,
+    mut following: Option<(&mut SteeringRates, f64)>,
+) {
+    for ((module, output), (_, v)) in io.wheels.iter().zip(wheel_velocities) {
         match output {
             WheelOutput::Bridge(publisher) => {
                 let _ = publisher.publish(Float64 { data: *v });
@@ -356,6 +376,10 @@ fn publish(
             }
         }
     }
+}
+
+/// Sends each arm module's goal and the tool pose of a decision, stamped with its tick.
+fn publish_goals(io: &Io, decision: &Decision, stamp: Time, odom_frame: &str) {
     if let Some(goals) = &decision.goals {
         for ((_, frame, publisher), (_, goal)) in io.goals.iter().zip(goals) {
             let pose = nalgebra::Isometry3::from_parts(goal.position_b.into(), goal.orientation_b);
@@ -400,6 +424,53 @@ fn refuse_duplicates(
         std::thread::sleep(Duration::from_millis(20));
     }
     Ok(())
+}
+
+/// Takes the arm nodes' commands on the steering legs' `joint_set` (hardware) into `steering`;
+/// whether any steering joint got a command. A non-finite position is counted as a rejected
+/// joint state and logged.
+fn take_steering_commands(
+    io: &Io,
+    steering: &mut SteeringRates,
+    now_s: f64,
+    report: &mut Report,
+    log: &mut RateLimited,
+) -> bool {
+    let mut any = false;
+    for input in &io.steering {
+        for _ in 0..MAX_TAKEN {
+            match input.commands.take() {
+                None => break,
+                Some(Ok((msg, _))) => {
+                    for (joint, limb_name) in &input.joints {
+                        let position = msg
+                            .name
+                            .iter()
+                            .position(|n| n == limb_name)
+                            .and_then(|k| msg.position.get(k));
+                        let Some(&q) = position else { continue };
+                        if steering.command(joint, q, now_s) {
+                            any = true;
+                        } else {
+                            report.joint_states_rejected += 1;
+                            if let Some(n) = log.check(Instant::now()) {
+                                warn!(
+                                    "{joint}: steering command {q} rejected ({n} more suppressed)"
+                                );
+                            }
+                        }
+                    }
+                }
+                Some(Err(why)) => {
+                    report.malformed += 1;
+                    if log.check(Instant::now()).is_some() {
+                        warn!("refused a malformed steering command: {why}");
+                    }
+                }
+            }
+        }
+    }
+    any
 }
 
 /// Runs the node until `shutdown` is set.
@@ -455,6 +526,9 @@ pub fn run(
     let mut last_stale_hold_s = f64::NEG_INFINITY;
     let mut base_xy: Option<[f64; 2]> = None;
     let mut liveliness_at = Instant::now();
+    // The last decided wheel velocities and their tick, sent again when a steering leg's
+    // command changes its wheels' following (hardware).
+    let mut last_wheels: Option<(Vec<(String, f64)>, Time)> = None;
 
     while !shutdown.load(Ordering::Relaxed) {
         let now_s = start.elapsed().as_secs_f64();
@@ -556,31 +630,16 @@ pub fn run(
             }
         }
 
-        for input in &io.steering {
-            for _ in 0..MAX_TAKEN {
-                match input.commands.take() {
-                    None => break,
-                    Some(Ok((msg, _))) => {
-                        for (joint, limb_name) in &input.joints {
-                            let position = msg
-                                .name
-                                .iter()
-                                .position(|n| n == limb_name)
-                                .and_then(|k| msg.position.get(k));
-                            if let Some(&q) = position {
-                                if !steering.command(joint, q, now_s) {
-                                    report.joint_states_rejected += 1;
-                                }
-                            }
-                        }
-                    }
-                    Some(Err(why)) => {
-                        report.malformed += 1;
-                        if log.check(Instant::now()).is_some() {
-                            warn!("refused a malformed steering command: {why}");
-                        }
-                    }
-                }
+        if take_steering_commands(&io, &mut steering, now_s, &mut report, &mut log) {
+            // A leg's new command changes its wheels' following now, not at the next decision.
+            if let Some((wheels, stamp)) = &last_wheels {
+                publish_wheels(
+                    &io,
+                    &config.model,
+                    wheels,
+                    *stamp,
+                    Some((&mut steering, now_s)),
+                );
             }
         }
 
@@ -665,6 +724,9 @@ pub fn run(
                 &odom_frame,
                 Some((&mut steering, now_s)),
             );
+            if !io.steering.is_empty() {
+                last_wheels = Some((decision.wheel_velocities.clone(), stamp));
+            }
             if decision.action.is_some() {
                 report.latency(odometry_age_s + decided_at.elapsed().as_secs_f64());
             }

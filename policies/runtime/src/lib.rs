@@ -14,7 +14,7 @@ mod onnxruntime;
 mod policy;
 mod tract;
 
-pub use model_file::{ModelFile, TensorShape};
+pub use model_file::{MissingKey, ModelFile, TensorShape};
 pub use onnxruntime::{ort_library_from_env, ORT_DYLIB_PATH};
 pub use policy::{Backend, BackendChoice, Network, RuntimeError, SkillPolicy, WholeBodyPolicy};
 

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use prost::Message;
 use tract_onnx::pb::tensor_shape_proto::dimension::Value as Dim;
 use tract_onnx::pb::type_proto::Value;
-use tract_onnx::pb::{ModelProto, ValueInfoProto};
+use tract_onnx::pb::{ModelProto, StringStringEntryProto, ValueInfoProto};
 
 /// A tensor shape from the file: `None` for a symbolic (dynamic) dimension.
 pub type TensorShape = Vec<Option<i64>>;
@@ -66,4 +66,36 @@ impl ModelFile {
             bytes,
         })
     }
+
+    /// The file's bytes with the metadata value of `key` replaced by `value`, the replaced value
+    /// kept under `record_key` unless that key is already there (so the first value survives
+    /// any number of re-stamps: `kumi policy restamp`). Returns the new bytes and the replaced
+    /// value; the graph is not touched.
+    pub fn restamp(
+        &self,
+        key: &str,
+        value: &str,
+        record_key: &str,
+    ) -> Result<(Vec<u8>, String), MissingKey> {
+        let mut model =
+            ModelProto::decode(self.bytes.as_slice()).expect("decoded once by ModelFile::decode");
+        let entry = model
+            .metadata_props
+            .iter_mut()
+            .find(|p| p.key == key)
+            .ok_or_else(|| MissingKey(key.to_string()))?;
+        let old = std::mem::replace(&mut entry.value, value.to_string());
+        if !model.metadata_props.iter().any(|p| p.key == record_key) {
+            model.metadata_props.push(StringStringEntryProto {
+                key: record_key.to_string(),
+                value: old.clone(),
+            });
+        }
+        Ok((model.encode_to_vec(), old))
+    }
 }
+
+/// A metadata key a file does not have.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("its metadata has no `{0}`")]
+pub struct MissingKey(pub String);
