@@ -75,18 +75,16 @@ fn restamp(args: RestampArgs) -> Result<()> {
     let out = args.out.as_ref().unwrap_or(path);
     crate::output::check_file(out, "--out")?;
     if meta.get(MORPHOLOGY_FINGERPRINT) == Some(&current) {
-        if out != path {
+        let done = if out == path {
+            "nothing written".to_string()
+        } else {
             std::fs::write(out, &file.bytes)
                 .with_context(|| format!("writing {}", out.display()))?;
-        }
+            format!("copied to {} unchanged", out.display())
+        };
         println!(
-            "{}: already stamped for `{robot}` as it is now ({current}); {}",
-            path.display(),
-            if out != path {
-                format!("copied to {} unchanged", out.display())
-            } else {
-                "nothing written".to_string()
-            }
+            "{}: already stamped for `{robot}` as it is now ({current}); {done}",
+            path.display()
         );
         return Ok(());
     }

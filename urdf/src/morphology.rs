@@ -302,23 +302,6 @@ impl Morphology {
                     })
                 }
             };
-            if m.follow_steering
-                && (module
-                    .actuators
-                    .iter()
-                    .all(|a| a.mode != crate::ActuatorMode::Velocity)
-                    || mount.is_none())
-            {
-                return Err(ModelError::new(
-                    file,
-                    at("follow_steering"),
-                    Problem::BadValue(format!(
-                        "only a mounted module with wheels can follow its steering; `{mname}` is a \
-                         {} `{kind}` module",
-                        if mount.is_none() { "root" } else { "wheel-less" }
-                    )),
-                ));
-            }
             modules.push(MorphologyModule {
                 name: mname,
                 kind,
@@ -347,30 +330,52 @@ impl Morphology {
     }
 }
 
-/// Checks that a module that follows its steering hangs from a module with joints to steer it
-/// (its parent's); the gain itself comes from the geometry at assembly.
+/// Checks each module that follows its steering: a mounted module with wheels, hanging from a
+/// module with joints to steer it; the gain itself comes from the geometry at assembly.
 fn validate_steering(
     file: &str,
     modules: &[MorphologyModule],
     library: &ModuleLibrary,
 ) -> Result<(), ModelError> {
-    for (i, m) in modules.iter().enumerate() {
-        let Some(mount) = m.mount.as_ref().filter(|_| m.follow_steering) else {
-            continue;
+    for (i, m) in modules
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m.follow_steering)
+    {
+        let bad = |message: String| {
+            ModelError::new(
+                file,
+                format!("module[{i}].follow_steering"),
+                Problem::BadValue(message),
+            )
+        };
+        let wheels = library.get(&m.kind).is_some_and(|k| {
+            k.actuators
+                .iter()
+                .any(|a| a.mode == crate::ActuatorMode::Velocity)
+        });
+        let Some(mount) = m.mount.as_ref().filter(|_| wheels) else {
+            return Err(bad(format!(
+                "only a mounted module with wheels can follow its steering; `{}` is a {} `{}` \
+                 module",
+                m.name,
+                if m.mount.is_none() {
+                    "root"
+                } else {
+                    "wheel-less"
+                },
+                m.kind
+            )));
         };
         let parent = modules
             .iter()
             .find(|p| p.name == mount.parent)
             .and_then(|p| library.get(&p.kind));
         if parent.is_some_and(|p| p.position_dofs() == 0) {
-            return Err(ModelError::new(
-                file,
-                format!("module[{i}].follow_steering"),
-                Problem::BadValue(format!(
-                    "`{}` hangs from `{}`, which has no joint to steer it",
-                    m.name, mount.parent
-                )),
-            ));
+            return Err(bad(format!(
+                "`{}` hangs from `{}`, which has no joint to steer it",
+                m.name, mount.parent
+            )));
         }
     }
     Ok(())

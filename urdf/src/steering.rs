@@ -7,7 +7,7 @@
 use nalgebra::Vector3;
 
 use crate::assemble::RobotModel;
-use crate::kinematics::JointKind;
+use crate::kinematics::{JointKind, KinematicTree, TreeJoint};
 
 /// One wheel joint rolling with the joint its module hangs from.
 #[derive(Debug, Clone, PartialEq)]
@@ -49,26 +49,11 @@ impl RobotModel {
         let Some((tree, poses)) = self.home_link_poses() else {
             return Vec::new();
         };
-        let position_joint = |name: &str| {
-            self.actuators()
-                .any(|a| a.joint == name && a.mode == crate::ActuatorMode::Position)
-        };
         let mut out = Vec::new();
         for m in self.modules.iter().filter(|m| m.follow_steering) {
-            let Some(mut link) = tree.link_index(&m.root_link) else {
+            let Some(s) = self.steering_joint_above(&tree, &m.root_link) else {
                 continue;
             };
-            // Walk up from the module's root link to the nearest actuated position joint.
-            let steering = loop {
-                let Some(j) = tree.joints().iter().find(|j| j.child_link == link) else {
-                    break None;
-                };
-                if j.kind == JointKind::Revolute && position_joint(&j.name) {
-                    break Some(j);
-                }
-                link = j.parent_link;
-            };
-            let Some(s) = steering else { continue };
             let frame = poses[s.parent_link] * s.origin;
             let axis = frame.rotation * s.axis.into_inner();
             let pivot = frame.translation.vector;
@@ -98,6 +83,25 @@ impl RobotModel {
             }
         }
         out
+    }
+
+    /// The nearest actuated revolute position joint above `link` in `tree`, walking up from it.
+    fn steering_joint_above<'t>(
+        &self,
+        tree: &'t KinematicTree,
+        link: &str,
+    ) -> Option<&'t TreeJoint> {
+        let mut link = tree.link_index(link)?;
+        loop {
+            let j = tree.joints().iter().find(|j| j.child_link == link)?;
+            let actuated = self
+                .actuators()
+                .any(|a| a.joint == j.name && a.mode == crate::ActuatorMode::Position);
+            if j.kind == JointKind::Revolute && actuated {
+                return Some(j);
+            }
+            link = j.parent_link;
+        }
     }
 
     /// The largest cylinder collider radius [m] of a link: its tyre.

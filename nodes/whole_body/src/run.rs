@@ -192,6 +192,7 @@ fn open_io(
     node: &mut RosNode,
     config: &WholeBodyNodeConfig,
     controller: &WholeBodyController,
+    steered: &SteeringRates,
 ) -> Result<Io, WholeBodyNodeError> {
     let robot = config.robot.as_str();
     let hardware = config.hardware.as_deref();
@@ -253,7 +254,6 @@ fn open_io(
     }
     let mut steering = Vec::new();
     if let Some(p) = hardware {
-        let steered = SteeringRates::new(&config.model);
         for module in &config.model.modules {
             let joints: Vec<(String, String)> = steered
                 .joints()
@@ -486,7 +486,8 @@ pub fn run(
         &mut node,
         &kumi_ros::rosout::logger_name(&namespace, "whole_body"),
     )?;
-    let io = open_io(&mut node, &config, &controller)?;
+    let mut steering = SteeringRates::new(&config.model);
+    let io = open_io(&mut node, &config, &controller, &steering)?;
     refuse_duplicates(&mut node, &config, io.tool_pose.gid())?;
     // Targets and the tool pose are in the odometry's frame: `<robot>/odom` from the sim
     // bridge, whatever the odometry says on hardware.
@@ -498,7 +499,6 @@ pub fn run(
         node.domain_id(),
         topics::robot_goal_pose(robot)
     );
-    let mut steering = SteeringRates::new(&config.model);
     if config.hardware.is_some() && !steering.is_empty() {
         info!(
             "wheels follow their steering (`follow_steering`): reading {} on the limbs' joint_set",

@@ -96,10 +96,7 @@ impl SteeringRates {
     /// The commanded rate [rad/s] of a steering joint at `now_s` [s] (0 for any other joint).
     pub fn rate(&mut self, joint: &str, now_s: f64) -> f64 {
         self.advance(now_s);
-        self.joints
-            .iter()
-            .find(|s| s.joint == joint)
-            .map_or(0.0, |s| s.rate.rate())
+        self.rate_now(joint)
     }
 
     /// Each wheel joint's velocity [rad/s] for wheel module `module` driven at `v` [rad/s] at
@@ -113,16 +110,28 @@ impl SteeringRates {
         now_s: f64,
     ) -> Option<Vec<(String, f64)>> {
         let mut wheels = wheel_joint_velocities(model, module, v)?;
+        self.advance(now_s);
         for (joint, velocity) in &mut wheels {
             let Some(c) = self.couplings.iter().find(|c| &c.wheel_joint == joint) else {
                 continue;
             };
-            let (steering, gain) = (c.steering_joint.clone(), c.gain);
-            let rate = self.rate(&steering, now_s);
             let actuator = model.actuators().find(|a| &a.joint == joint)?;
-            *velocity = follow_steering(actuator, *velocity, gain, rate);
+            *velocity = follow_steering(
+                actuator,
+                *velocity,
+                c.gain,
+                self.rate_now(&c.steering_joint),
+            );
         }
         Some(wheels)
+    }
+
+    /// The commanded rate [rad/s] of a steering joint at the time last advanced to.
+    fn rate_now(&self, joint: &str) -> f64 {
+        self.joints
+            .iter()
+            .find(|s| s.joint == joint)
+            .map_or(0.0, |s| s.rate.rate())
     }
 }
 
