@@ -38,7 +38,7 @@ pub struct EvalBodyArgs {
     pub policy: Option<PathBuf>,
     /// The training config the policy was trained with (task and action bounds; default:
     /// the one the shipped policy of the robot and variant finished its training with, e.g.
-    /// train/configs/whole_body/tricycle_fifth.toml).
+    /// train/configs/whole_body/tricycle_sixth.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// The frozen skill (default: the shipped policies/arm_reach.onnx).

@@ -287,11 +287,12 @@ impl TrainBodyConfig {
 
 /// The last stage of each shipped policy that trained in stages with other action terms than
 /// its first (the first stage is the robot's entry in [`SHIPPED_BODY_CONFIGS`], the default to
-/// train from): Tricycle's fourth stage tightened the turn governor, and its fifth keeps it.
+/// train from): Tricycle's fourth stage tightened the turn governor, and its fifth and sixth
+/// keep it.
 const SHIPPED_LAST_STAGES: [(&str, Variant, &str); 1] = [(
     "tricycle",
     Variant::Hierarchical,
-    include_str!("../../train/configs/whole_body/tricycle_fifth.toml"),
+    include_str!("../../train/configs/whole_body/tricycle_sixth.toml"),
 )];
 
 /// The whole-body config at `path`, or the one shipped for `robot` and `variant` (the first
@@ -805,10 +806,10 @@ mod tests {
     #[test]
     fn tricycles_later_stage_configs_change_only_the_steps_noise_and_governor() {
         // The shipped policy is tricycle.toml resumed with tricycle_settle.toml, then with
-        // tricycle_third.toml, tricycle_fourth.toml and tricycle_fifth.toml: the task and reward
-        // it trained on must stay the first stage's, its action bounds too but for the fourth
-        // stage's tighter turn governor (which the fifth keeps), and each stage must go on where
-        // the one before it stopped.
+        // tricycle_third.toml, tricycle_fourth.toml, tricycle_fifth.toml and
+        // tricycle_sixth.toml: the task and reward it trained on must stay the first stage's,
+        // its action bounds too but for the fourth stage's tighter turn governor (which the
+        // fifth and sixth keep), and each stage must go on where the one before it stopped.
         let first = read_body_config(None, "tricycle", Variant::Hierarchical).unwrap();
         let stage = |name: &str| {
             let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -820,7 +821,8 @@ mod tests {
         let third = stage("tricycle_third.toml");
         let fourth = stage("tricycle_fourth.toml");
         let fifth = stage("tricycle_fifth.toml");
-        let stages = [&first, &second, &third, &fourth, &fifth];
+        let sixth = stage("tricycle_sixth.toml");
+        let stages = [&first, &second, &third, &fourth, &fifth, &sixth];
         for pair in stages.windows(2) {
             let (before, after) = (pair[0], pair[1]);
             assert_eq!(after.task, first.task);
@@ -832,6 +834,7 @@ mod tests {
         assert_eq!(second.action, first.action);
         assert_eq!(third.action, first.action);
         assert_eq!(fifth.action, fourth.action);
+        assert_eq!(sixth.action, fourth.action);
         let (first_bounds, fourth_bounds) = (first.action.unwrap(), fourth.action.unwrap());
         assert_eq!(fourth_bounds.lateral_acceleration_m_s2, Some(0.07));
         assert_eq!(
@@ -844,8 +847,8 @@ mod tests {
         // What eval checks the shipped policy against by default is its last stage; training
         // starts from the first.
         let shipped = read_shipped_policy_config(None, "tricycle", Variant::Hierarchical).unwrap();
-        assert_eq!(shipped.action, fifth.action);
-        assert_eq!(shipped.ppo, fifth.ppo);
+        assert_eq!(shipped.action, sixth.action);
+        assert_eq!(shipped.ppo, sixth.ppo);
         for (robot, variant, _) in SHIPPED_BODY_CONFIGS {
             if (robot, variant) != ("tricycle", Variant::Hierarchical) {
                 let (a, b) = (

@@ -428,13 +428,15 @@ mod on_mujoco {
         assert!(error < 0.42, "{out}");
     }
 
-    /// The 90th percentile of Tricycle's closest approach [m] to its target over the MuJoCo
-    /// rollouts that started within 1.5 m of it, as this target does (0.0568 m over 180 of 1000;
-    /// policies/tricycle_whole_body.md). The closest approach, not the final error: Tricycle comes
-    /// close and then wanders near the target (an earlier policy's final errors were 0.40-0.72 m
-    /// in eight runs here, its closest approaches 0.05-0.09 m), so its final error depends on the
-    /// instant the episode ends.
-    const TRICYCLE_CLOSEST_P90: f64 = 0.0568;
+    /// The 99th percentile of Tricycle's closest approach [m] to its target over the MuJoCo
+    /// rollouts that started within 1.5 m of it, as this target does (0.1552 m over 180 of 1000,
+    /// median 0.0315 m, p90 0.0703 m; policies/tricycle_whole_body.md). One run is one draw of
+    /// that spread, so the bound is its far tail, not its p90: a robot whose goals went astray,
+    /// or that fell on the way, comes nowhere near a target 1.1 m off. The closest approach, not
+    /// the final error: Tricycle comes close and then wanders near the target (an earlier
+    /// policy's final errors were 0.40-0.72 m in eight runs here, its closest approaches
+    /// 0.05-0.09 m), so its final error depends on the instant the episode ends.
+    const TRICYCLE_CLOSEST_P99: f64 = 0.1552;
 
     #[test]
     fn a_launched_tricycle_reaches_a_target_from_rclpy_on_mujoco() {
@@ -459,9 +461,9 @@ mod on_mujoco {
             out["diagnostics"]["tipped_over"]
         );
         // A robot whose goals went astray never comes near; one that fell on the way neither. A
-        // fall after coming close is not asserted against: 1 of those 180 rollouts fell (0.6 %),
-        // and the policy's falls are measured by `kumi eval whole-body`, not here.
-        assert!(closest < TRICYCLE_CLOSEST_P90, "{out}");
+        // fall after coming close is not asserted against: the policy's falls are measured by
+        // `kumi eval whole-body`, not here.
+        assert!(closest < TRICYCLE_CLOSEST_P99, "{out}");
     }
 }
 

@@ -1,11 +1,13 @@
 //! Wheels that follow their steering get the same velocities from the simulator's servos
 //! (`kumi_engine::ServoBank`, what training, evaluation and the sim bridge run) and from the
 //! whole-body node on hardware (`kumi_whole_body_node::steering::SteeringRates`, which sends
-//! them to Motion Stack): for the same steering commands at the same times, bit for bit.
+//! them to Motion Stack): for the same steering commands and base turning at the same times,
+//! bit for bit.
 
 use kumi_model::{assemble, load_morphology, ActuatorMode, ModuleLibrary};
 use kumi_whole_body_node::steering::SteeringRates;
 use kumi_worlds::{home_joint_positions, ServoBank};
+use nalgebra::Vector3;
 
 #[test]
 fn the_servos_and_the_hardware_node_roll_following_wheels_alike() {
@@ -23,7 +25,8 @@ fn the_servos_and_the_hardware_node_roll_following_wheels_alike() {
     let mut compared = 0;
     for k in 0..40 {
         let t_s = (k * per_command) as f64 * physics_dt;
-        // Every leg's tip roll commanded along a different wave; the legs stop at k = 30.
+        // Every leg's tip roll and joint5 commanded along different waves; the legs stop at
+        // k = 30.
         for (n, leg) in ["leg0", "leg1", "leg2"].iter().enumerate() {
             if k >= 30 {
                 continue;
@@ -32,10 +35,22 @@ fn the_servos_and_the_hardware_node_roll_following_wheels_alike() {
             let mut targets = q[range.clone()].to_vec();
             let roll = 0.4 * ((k as f64) * 0.3 + n as f64).sin();
             targets[6] += roll;
+            targets[4] += 0.2 * ((k as f64) * 0.5 - n as f64).cos();
             bank.set(leg, ActuatorMode::Position, &targets).unwrap();
-            let commanded = bank.commands()[range.start + 6];
-            assert!(rates.command(&format!("{leg}/joint7"), commanded, t_s));
+            for joint in [6, 4] {
+                let commanded = bank.commands()[range.start + joint];
+                let name = format!("{leg}/joint{}", joint + 1);
+                assert!(rates.command(&name, commanded, t_s));
+            }
         }
+        // The base turns (and rocks) along its own wave, as odometry would report it.
+        let w_b = Vector3::new(
+            0.1 * (k as f64).cos(),
+            -0.05,
+            0.8 * ((k as f64) * 0.2).sin(),
+        );
+        bank.set_base_angular_velocity(w_b);
+        assert!(rates.base_turning(w_b, t_s));
         for (module, v) in wheel_modules.iter().zip(v) {
             let sign = bank.drive_sign(module).unwrap();
             bank.set(module, ActuatorMode::Velocity, &[sign * v, sign * v])

@@ -3,6 +3,8 @@
 //! increment means, and the control rate. The simulator's servo law (set-points, slewing) lives
 //! in `kumi-engine`; nothing here needs a physics engine.
 
+use nalgebra::Vector3;
+
 use crate::{Actuator, ActuatorMode};
 
 /// The control rate of every kumi robot [Hz]: one control step each 1/30 s (the paper's 30 Hz).
@@ -75,12 +77,32 @@ impl CommandRate {
     }
 }
 
+/// How fast a wheel module turns about its steering joint's axis [rad/s]: the commanded rates
+/// of the joints that turn it (`joint_turns`: each joint's share of the axis and its commanded
+/// rate [rad/s], [`CommandRate`]; [`crate::SteeringCoupling::turning_joints`]) plus the base's
+/// angular velocity about that axis, `axis_b . base_angular_velocity_b` (the axis,
+/// [`crate::SteeringCoupling::axis_b`], and the velocity [rad/s], both in the base frame). A
+/// turning base carries its wheel modules round with it: wheels that only roll straight would
+/// scrub against the turn.
+pub fn steering_turn_rate(
+    joint_turns: impl IntoIterator<Item = (f64, f64)>,
+    axis_b: &Vector3<f64>,
+    base_angular_velocity_b: &Vector3<f64>,
+) -> f64 {
+    let joints: f64 = joint_turns
+        .into_iter()
+        .map(|(share, rate)| share * rate)
+        .sum();
+    let (a, w) = (axis_b, base_angular_velocity_b);
+    joints + (a.x * w.x + a.y * w.y + a.z * w.z)
+}
+
 /// A wheel's velocity [rad/s] when it follows its module's steering: its command [rad/s] plus
-/// `gain` times the steering joint's commanded rate [rad/s] ([`CommandRate`]), within its
-/// velocity limit. The simulator's servos apply it each physics step, the whole-body node on
-/// hardware each time it sends the wheels.
-pub fn follow_steering(actuator: &Actuator, command: f64, gain: f64, steering_rate: f64) -> f64 {
-    actuator.clamp_velocity(command + gain * steering_rate)
+/// `gain` times the module's turn rate [rad/s] ([`steering_turn_rate`]), within its velocity
+/// limit. The simulator's servos apply it each physics step, the whole-body node on hardware
+/// each time it sends the wheels.
+pub fn follow_steering(actuator: &Actuator, command: f64, gain: f64, turn_rate: f64) -> f64 {
+    actuator.clamp_velocity(command + gain * turn_rate)
 }
 
 /// Clamps a raw command to the actuator's limits; `None` for a non-finite command.
@@ -185,6 +207,29 @@ mod tests {
         // A jump of 1 rad in 1/30 s is limited to 1.5 rad/s.
         assert_eq!(command_rate(0.0, -1.0, 1.0 / 30.0, 1.5), Some(-1.5));
         assert_eq!(command_rate(0.0, 1.0, 0.0, 1.5), None);
+    }
+
+    #[test]
+    fn a_module_turns_with_its_joints_and_with_the_base_about_the_steering_axis() {
+        // A steering axis pointing down (Tricycle's leg tips): the base turning left at 0.5
+        // rad/s turns the module by -0.5 rad/s about it; with 0.2 rad/s of steering, -0.3.
+        let down = Vector3::new(0.0, 0.0, -1.0);
+        let left = Vector3::new(0.0, 0.0, 0.5);
+        assert_eq!(steering_turn_rate([(1.0, 0.2)], &down, &left), 0.2 - 0.5);
+        // A second joint along the axis adds its rate; one at half the share, half of it.
+        assert_eq!(
+            steering_turn_rate([(1.0, 0.2), (1.0, 0.1), (0.5, 0.2)], &down, &left),
+            0.2 + 0.1 + 0.1 - 0.5
+        );
+        // Rolling and pitching about axes across the steering axis turn it not at all.
+        assert_eq!(
+            steering_turn_rate([(1.0, 0.2)], &down, &Vector3::new(0.3, -0.4, 0.0)),
+            0.2
+        );
+        // A tilted axis takes the base's turn about its own line.
+        let tilted = Vector3::new(0.6, 0.0, 0.8);
+        let turn = steering_turn_rate([], &tilted, &Vector3::new(1.0, 0.0, 1.0));
+        assert!((turn - 1.4).abs() < 1e-12);
     }
 
     fn arm_joint() -> Actuator {

@@ -1,28 +1,45 @@
 //! Wheels that follow their module's steering: when the joint a wheel module hangs from turns
 //! it about the vertical (a leg's tip roll), each wheel rolls by the distance its contact is
 //! carried sideways instead of being dragged across the ground (one velocity for both wheels
-//! drags them). The rule is pure geometry at home, derived once from the model; the servo layer
-//! of every engine adds `gain * steering rate` to each wheel's velocity command.
+//! drags them). Whatever else turns the module about that axis drags them alike: other joints
+//! of the leg whose axes share its direction, and the base's own turning. So the rate followed
+//! is the module's turn about the steering axis ([`crate::commands::steering_turn_rate`]): the
+//! commanded rates of those joints, each by its share of the axis, plus the base's angular
+//! velocity about it. The rule is pure geometry at home, derived once from the model; the servo
+//! layer of every engine adds `gain * turn rate` to each wheel's velocity command.
 
 use nalgebra::Vector3;
 
 use crate::assemble::RobotModel;
 use crate::kinematics::{JointKind, KinematicTree, TreeJoint};
 
-/// One wheel joint rolling with the joint its module hangs from.
+/// One wheel joint rolling with its module's turns about the joint it hangs from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SteeringCoupling {
     /// The wheel's velocity joint (`wheel0/wheel_left`).
     pub wheel_joint: String,
     /// The position joint the wheel module hangs from (`leg0/joint7`).
     pub steering_joint: String,
-    /// Wheel rate per steering rate [(rad/s) / (rad/s)], both about their own joint axes.
+    /// Wheel rate per turn rate of its module about the steering axis [(rad/s) / (rad/s)],
+    /// both about their own axes.
     pub gain: f64,
+    /// The steering joint's axis in the base frame at home (unit): the base's turning about
+    /// it turns the wheel module as the joint does.
+    pub axis_b: Vector3<f64>,
+    /// Every actuated revolute position joint above the module that turns it about the
+    /// steering axis, nearest first (the steering joint), with its share: its own axis dotted
+    /// with the steering axis at home (shares below 1e-6 are left out). Tricycle's legs:
+    /// `joint7` and `joint5`, both 1.
+    pub turning_joints: Vec<(String, f64)>,
 }
 
 /// Gains below this are geometry that does not carry the wheel along its rolling direction (a
 /// roll about the axle's own line, as Dragon's rear wheels hang): no coupling.
 const MIN_GAIN: f64 = 1e-6;
+
+/// Shares below this are joints whose axes lie across the steering axis (a leg's pitches and
+/// the rolls along its length): they do not turn the module about it.
+const MIN_SHARE: f64 = 1e-6;
 
 /// The wheel rate [rad/s per rad/s of steering] that keeps a wheel rolling, not sliding, when a
 /// joint turns it: the wheel centre `centre` moves at `axis x (centre - pivot)` per rad/s of the
@@ -43,20 +60,30 @@ pub fn rolling_gain(
 impl RobotModel {
     /// The steering couplings of every wheel module whose morphology entry sets
     /// `follow_steering`, at home, in actuator order of the wheels. A wheel is coupled to the
-    /// nearest actuated position joint above its module; wheels whose gain is below 1e-6, or
-    /// whose link has no cylinder collider (no radius), get none.
+    /// nearest actuated position joint above its module (its gain and axis) and turns with
+    /// every such joint whose axis shares that one's direction; wheels whose gain is below
+    /// 1e-6, or whose link has no cylinder collider (no radius), get none.
     pub fn steering_couplings(&self) -> Vec<SteeringCoupling> {
         let Some((tree, poses)) = self.home_link_poses() else {
             return Vec::new();
         };
         let mut out = Vec::new();
         for m in self.modules.iter().filter(|m| m.follow_steering) {
-            let Some(s) = self.steering_joint_above(&tree, &m.root_link) else {
+            let above = self.position_joints_above(&tree, &m.root_link);
+            let Some(s) = above.first() else {
                 continue;
             };
             let frame = poses[s.parent_link] * s.origin;
             let axis = frame.rotation * s.axis.into_inner();
             let pivot = frame.translation.vector;
+            let turning_joints: Vec<(String, f64)> = above
+                .iter()
+                .map(|j| {
+                    let axis_j = (poses[j.parent_link] * j.origin).rotation * j.axis.into_inner();
+                    (j.name.clone(), axis_j.dot(&axis))
+                })
+                .filter(|(_, share)| share.abs() >= MIN_SHARE)
+                .collect();
             for wheel in m.velocity_joints() {
                 let Some(w) = tree.joint_index(&wheel.joint).map(|i| &tree.joints()[i]) else {
                     continue;
@@ -78,6 +105,8 @@ impl RobotModel {
                         wheel_joint: wheel.joint.clone(),
                         steering_joint: s.name.clone(),
                         gain,
+                        axis_b: axis,
+                        turning_joints: turning_joints.clone(),
                     });
                 }
             }
@@ -85,23 +114,23 @@ impl RobotModel {
         out
     }
 
-    /// The nearest actuated revolute position joint above `link` in `tree`, walking up from it.
-    fn steering_joint_above<'t>(
-        &self,
-        tree: &'t KinematicTree,
-        link: &str,
-    ) -> Option<&'t TreeJoint> {
-        let mut link = tree.link_index(link)?;
-        loop {
-            let j = tree.joints().iter().find(|j| j.child_link == link)?;
+    /// The actuated revolute position joints above `link` in `tree`, walking up from it:
+    /// nearest first.
+    fn position_joints_above<'t>(&self, tree: &'t KinematicTree, link: &str) -> Vec<&'t TreeJoint> {
+        let mut out = Vec::new();
+        let Some(mut link) = tree.link_index(link) else {
+            return out;
+        };
+        while let Some(j) = tree.joints().iter().find(|j| j.child_link == link) {
             let actuated = self
                 .actuators()
                 .any(|a| a.joint == j.name && a.mode == crate::ActuatorMode::Position);
             if j.kind == JointKind::Revolute && actuated {
-                return Some(j);
+                out.push(j);
             }
             link = j.parent_link;
         }
+        out
     }
 
     /// The largest cylinder collider radius [m] of a link: its tyre.

@@ -120,7 +120,7 @@ fn the_fixed_arm_tool_points_up_at_zero_and_its_x_axis_is_the_arm_axis() {
 }
 
 #[test]
-fn tricycles_wheels_follow_their_legs_tip_rolls_and_the_others_have_no_couplings() {
+fn tricycles_wheels_follow_their_legs_turns_about_the_vertical_and_the_others_have_no_couplings() {
     let tricycle = model("tricycle");
     let couplings = tricycle.steering_couplings();
     assert_eq!(couplings.len(), 6, "{couplings:?}");
@@ -136,6 +136,19 @@ fn tricycles_wheels_follow_their_legs_tip_rolls_and_the_others_have_no_couplings
             -0.286 / 0.27
         };
         assert!((c.gain - expected).abs() < 1e-9, "{c:?}");
+        // The tip roll and joint5 turn the wheel module about the vertical; the pitches and
+        // the rolls about the leg's length (joints 1 and 3) do not.
+        let turning: Vec<&str> = c.turning_joints.iter().map(|(j, _)| j.as_str()).collect();
+        assert_eq!(
+            turning,
+            [format!("{leg}/joint7"), format!("{leg}/joint5")],
+            "{c:?}"
+        );
+        assert!(c
+            .turning_joints
+            .iter()
+            .all(|(_, share)| (share - 1.0).abs() < 1e-9));
+        assert!((c.axis_b - nalgebra::Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-9);
     }
     for other in ["minimal", "dragon"] {
         assert!(model(other).steering_couplings().is_empty(), "{other}");

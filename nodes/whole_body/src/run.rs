@@ -171,15 +171,15 @@ struct Io {
     joint_states: Vec<(StrictSubscription<JointState>, String, Vec<String>)>,
     goals: Vec<(String, String, Publisher<PoseStamped>)>,
     wheels: Vec<(String, WheelOutput)>,
-    /// On hardware, per module with a steering joint its wheels follow: its limb's `joint_set`
-    /// (the arm node's commands).
+    /// On hardware, per module with joints that turn a following wheel module: its limb's
+    /// `joint_set` (the arm node's commands).
     steering: Vec<SteeringInput>,
     tool_pose: Publisher<PoseStamped>,
     diagnostics: Publisher<DiagnosticArray>,
 }
 
-/// A limb's `joint_set` (the arm node's commands) and the steering joints read from it, by
-/// their model and limb names.
+/// A limb's `joint_set` (the arm node's commands) and the joints read from it that turn a
+/// following wheel module, by their model and limb names.
 struct SteeringInput {
     commands: StrictSubscription<JointState>,
     joints: Vec<(String, String)>,
@@ -331,7 +331,7 @@ fn publish(
 }
 
 /// Sends each wheel module its velocity [rad/s] (`(module, v)`, in the order of `io.wheels`).
-/// On hardware, wheels that follow their steering add its commanded rate at `following`'s
+/// On hardware, wheels that follow their steering add their module's turn at `following`'s
 /// time [s] (`None`: they do not, as when the node stops them on its way out).
 fn publish_wheels(
     io: &Io,
@@ -427,8 +427,8 @@ fn refuse_duplicates(
 }
 
 /// Takes the arm nodes' commands on the steering legs' `joint_set` (hardware) into `steering`;
-/// whether any steering joint got a command. A non-finite position is counted as a rejected
-/// joint state and logged.
+/// whether any joint that turns a wheel module got a command. A non-finite position is counted
+/// as a rejected joint state and logged.
 fn take_steering_commands(
     io: &Io,
     steering: &mut SteeringRates,
@@ -585,6 +585,9 @@ pub fn run(
                         }
                         last_odom_stamp = Some(stamp);
                         base_xy = Some([base.pose_w.translation.x, base.pose_w.translation.y]);
+                        // Wheels that follow their steering also follow the base's turning.
+                        let w_b = msg.twist.twist.angular;
+                        steering.base_turning(Vector3::new(w_b.x, w_b.y, w_b.z), now_s);
                         tick.base(stamp, base, now_s);
                     }
                     None => {

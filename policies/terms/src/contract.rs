@@ -81,18 +81,24 @@ impl ContractMismatch {
 }
 
 /// A robot's fingerprint: its URDF, each module's name, role and home angles, and its wheels'
-/// steering couplings (none for robots without `follow_steering`, whose fingerprints are what
-/// they were before couplings existed).
+/// steering couplings with their axes and turning joints (none for robots without
+/// `follow_steering`, whose fingerprints are what they were before couplings existed).
 pub fn morphology_fingerprint(model: &RobotModel) -> String {
     let mut text = model.urdf_xml();
     for m in &model.modules {
         text.push_str(&format!("\n{}:{}:{:?}", m.name, m.role, m.home));
     }
     for c in model.steering_couplings() {
+        // The axis and the joints that turn the module too: a following wheel turns with each
+        // of them and with the base about that axis.
+        let a = c.axis_b;
         text.push_str(&format!(
-            "\nsteer:{}<-{}:{:.9}",
-            c.wheel_joint, c.steering_joint, c.gain
+            "\nsteer:{}<-{}:{:.9}:turn[{:.6},{:.6},{:.6}]",
+            c.wheel_joint, c.steering_joint, c.gain, a.x, a.y, a.z
         ));
+        for (joint, share) in &c.turning_joints {
+            text.push_str(&format!(":{joint}*{share:.6}"));
+        }
     }
     metadata::fingerprint(&text)
 }

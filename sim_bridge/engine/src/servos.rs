@@ -7,7 +7,8 @@ use kumi_model::{Actuator, ActuatorMode, RobotModel};
 
 use crate::actuator::{integrate_velocity_setpoint, max_lead, slew, ServoState};
 use crate::error::SimError;
-use kumi_model::commands::{clamp_command, follow_steering};
+use kumi_model::commands::{clamp_command, follow_steering, steering_turn_rate};
+use nalgebra::Vector3;
 
 /// Every actuator of a robot with its servo state, in the model's actuator order.
 #[derive(Debug, Clone, PartialEq)]
@@ -18,9 +19,24 @@ pub struct ServoBank {
     modules: Vec<(String, Range<usize>)>,
     /// Each module's [`RobotModel::wheel_drive_sign`], in the order of `modules`.
     drive_signs: Vec<f64>,
-    /// Per actuator: the steering joint a wheel follows and its gain
-    /// ([`RobotModel::steering_couplings`]); `None` for every other joint.
-    steering: Vec<Option<(usize, f64)>>,
+    /// Per actuator: the steering a wheel follows ([`RobotModel::steering_couplings`]); `None`
+    /// for every other joint.
+    steering: Vec<Option<Following>>,
+    /// The base's angular velocity [rad/s] in the base frame, as the engine last set it
+    /// ([`ServoBank::set_base_angular_velocity`]).
+    base_angular_velocity_b: Vector3<f64>,
+}
+
+/// The steering one wheel follows.
+#[derive(Debug, Clone, PartialEq)]
+struct Following {
+    /// The joints that turn its module: actuator index and share of the steering axis
+    /// ([`kumi_model::SteeringCoupling::turning_joints`]).
+    joints: Vec<(usize, f64)>,
+    /// Wheel rate per turn rate of its module [(rad/s) / (rad/s)].
+    gain: f64,
+    /// The steering axis in the base frame at home.
+    axis_b: Vector3<f64>,
 }
 
 /// What the PD law of one servo tracks during one physics step.
@@ -49,15 +65,29 @@ impl ServoBank {
         let index = |joint: &str| actuators.iter().position(|a| a.joint == joint);
         let mut steering = vec![None; actuators.len()];
         for c in model.steering_couplings() {
-            if let (Some(wheel), Some(steer)) = (index(&c.wheel_joint), index(&c.steering_joint)) {
-                // Parents come first, so the steering joint advances before its wheels in each
-                // physics step and they read this step's rate.
-                assert!(steer < wheel, "a steering joint precedes its wheels");
-                steering[wheel] = Some((steer, c.gain));
-            }
+            let Some(wheel) = index(&c.wheel_joint) else {
+                continue;
+            };
+            let joints: Vec<(usize, f64)> = c
+                .turning_joints
+                .iter()
+                .filter_map(|(joint, share)| Some((index(joint)?, *share)))
+                .collect();
+            // Parents come first, so the turning joints advance before their wheels in each
+            // physics step and they read this step's rates.
+            assert!(
+                joints.iter().all(|&(j, _)| j < wheel),
+                "turning joints precede their wheels"
+            );
+            steering[wheel] = Some(Following {
+                joints,
+                gain: c.gain,
+                axis_b: c.axis_b,
+            });
         }
         Self {
             steering,
+            base_angular_velocity_b: Vector3::zeros(),
             actuators,
             states,
             modules,
@@ -98,7 +128,8 @@ impl ServoBank {
     }
 
     /// Every servo holds `joint_positions` (one per actuator): position servos commanded
-    /// there, velocity servos to stop, braked at that angle.
+    /// there, velocity servos to stop, braked at that angle. The base's angular velocity is
+    /// forgotten until the engine sets it again.
     pub fn hold(&mut self, joint_positions: &[f64]) {
         assert_eq!(
             joint_positions.len(),
@@ -113,6 +144,7 @@ impl ServoBank {
         {
             *state = ServoState::holding(a.mode, q);
         }
+        self.base_angular_velocity_b = Vector3::zeros();
     }
 
     /// Replaces every servo state (restoring a snapshot).
@@ -182,14 +214,34 @@ impl ServoBank {
         self.states.iter().map(|s| s.command).collect()
     }
 
+    /// The base's angular velocity [rad/s] in the base frame, which following wheels add to
+    /// their steering ([`ServoBank::advance`]): the engines set it before each physics step
+    /// (zero for a fixed base). A non-finite value (a state that blew up) counts as zero.
+    pub fn set_base_angular_velocity(&mut self, w_b: Vector3<f64>) {
+        self.base_angular_velocity_b = if w_b.iter().all(|x| x.is_finite()) {
+            w_b
+        } else {
+            Vector3::zeros()
+        };
+    }
+
     /// Advances servo `i`'s set-point by one physics step of `dt` [s], given its measured
     /// position `q` [rad], and returns what its PD law tracks during that step. Position
     /// set-points slew toward the command at the velocity limit; wheel set-points integrate the
     /// velocity command without winding up. A wheel that follows its module's steering adds
-    /// `gain * rate` of its steering joint (advanced earlier in the same physics step), within
-    /// its velocity limit.
+    /// `gain` times its module's turn rate, within its velocity limit: the commanded rates of
+    /// the joints that turn it (advanced earlier in the same physics step) plus the base's
+    /// turning about the steering axis ([`steering_turn_rate`]).
     pub fn advance(&mut self, i: usize, q: f64, dt: f64) -> ServoTarget {
-        let following = self.steering[i].map(|(j, gain)| (gain, self.states[j].rate_now));
+        let following = self.steering[i].as_ref().map(|f| {
+            let joint_turns = f
+                .joints
+                .iter()
+                .map(|&(j, share)| (share, self.states[j].rate_now));
+            let turn_rate =
+                steering_turn_rate(joint_turns, &f.axis_b, &self.base_angular_velocity_b);
+            (f.gain, turn_rate)
+        });
         let a = &self.actuators[i];
         let s = &mut self.states[i];
         match a.mode {
@@ -203,8 +255,8 @@ impl ServoBank {
                 }
             }
             ActuatorMode::Velocity => {
-                let velocity = following.map_or(s.command, |(gain, rate)| {
-                    follow_steering(a, s.command, gain, rate)
+                let velocity = following.map_or(s.command, |(gain, turn_rate)| {
+                    follow_steering(a, s.command, gain, turn_rate)
                 });
                 s.setpoint = integrate_velocity_setpoint(s.setpoint, velocity, q, max_lead(a), dt);
                 ServoTarget {
@@ -281,6 +333,63 @@ mod tests {
         assert_eq!((t[left].velocity, t[right].velocity), (sign, sign));
         // Other wheel modules do not follow leg0.
         assert_eq!(t[index("wheel1/wheel_left")].velocity, 0.0);
+    }
+
+    #[test]
+    fn a_wheel_follows_every_turn_of_its_module_about_the_steering_axis() {
+        let model = model("tricycle");
+        let mut bank = ServoBank::new(&model);
+        let q = home_joint_positions(&model);
+        bank.hold(&q);
+        let index = |joint: &str| bank.actuators().iter().position(|a| a.joint == joint);
+        let (roll, joint5, left, right) = (
+            index("leg0/joint7").unwrap(),
+            index("leg0/joint5").unwrap(),
+            index("wheel0/wheel_left").unwrap(),
+            index("wheel0/wheel_right").unwrap(),
+        );
+        // Tricycle's leg tips steer about the vertical, pointing down at home.
+        let coupling = &model.steering_couplings()[0];
+        assert_eq!(coupling.wheel_joint, "wheel0/wheel_left");
+        assert!((coupling.axis_b - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-9);
+        let gain = coupling.gain;
+        let dt = 1.0 / 120.0;
+        let command = |bank: &mut ServoBank, roll_rad: f64| {
+            let mut targets = q[bank.module_range("leg0").unwrap()].to_vec();
+            targets[6] = roll_rad;
+            bank.set("leg0", ActuatorMode::Position, &targets).unwrap();
+        };
+        // The base turning left at 0.5 rad/s (its z up) turns the module by -0.5 rad/s about
+        // the steering axis: the wheels roll apart though the leg holds still.
+        bank.set_base_angular_velocity(Vector3::new(0.0, 0.0, 0.5));
+        command(&mut bank, q[roll]);
+        for _ in 0..4 {
+            let t = physics_step(&mut bank, &q, dt);
+            assert!((t[left].velocity + gain * 0.5).abs() < 1e-12);
+            assert!((t[right].velocity - gain * 0.5).abs() < 1e-12);
+        }
+        // A leg steering against the turn (+0.5 rad/s about its downward axis) keeps its
+        // module's heading in the world: the wheels roll straight.
+        command(&mut bank, q[roll] + 0.5 / 30.0);
+        for _ in 0..4 {
+            let t = physics_step(&mut bank, &q, dt);
+            assert!(t[left].velocity.abs() < 1e-9 && t[right].velocity.abs() < 1e-9);
+        }
+        // Rolling and pitching do not turn the modules about their vertical axes.
+        bank.set_base_angular_velocity(Vector3::new(0.7, -0.4, 0.0));
+        let t = physics_step(&mut bank, &q, dt);
+        assert!(t[left].velocity.abs() < 1e-12 && t[right].velocity.abs() < 1e-12);
+        // The leg's joint5 turns about the vertical too: 0.01 rad of it in 1/30 s, with joint7
+        // held, rolls the wheels apart as 0.3 rad/s of steering would.
+        let mut targets = q[bank.module_range("leg0").unwrap()].to_vec();
+        targets[6] = q[roll] + 0.5 / 30.0;
+        bank.set("leg0", ActuatorMode::Position, &targets).unwrap();
+        (0..4).for_each(|_| drop(physics_step(&mut bank, &q, dt)));
+        targets[4] = q[joint5] + 0.01;
+        bank.set("leg0", ActuatorMode::Position, &targets).unwrap();
+        let t = physics_step(&mut bank, &q, dt);
+        assert!((t[left].velocity - gain * 0.3).abs() < 1e-9);
+        assert!((t[right].velocity + gain * 0.3).abs() < 1e-9);
     }
 
     #[test]

@@ -181,6 +181,12 @@ impl MujocoWorld {
     /// MuJoCo's step.
     fn physics_step(&mut self) {
         let dt = self.config.mujoco_dt();
+        if !self.model.fixed_base {
+            // The free joint's angular velocity is in the base's own frame.
+            let w = &self.data.qvel()[3..6];
+            self.servos
+                .set_base_angular_velocity(Vector3::new(w[0], w[1], w[2]));
+        }
         for i in 0..self.joints.len() {
             let j = self.joints[i];
             let q = self.data.qpos()[j.qpos];

@@ -273,6 +273,9 @@ impl SimWorld for World {
             if self.diverged {
                 break;
             }
+            let (_, w_w) = self.base_twist_w();
+            let w_b = self.base_pose().rotation.inverse() * w_w;
+            self.servos.set_base_angular_velocity(w_b);
             for (i, joint) in self.joints.iter().enumerate() {
                 let (mb, link_id) = self
                     .physics
