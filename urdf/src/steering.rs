@@ -18,8 +18,6 @@ use crate::kinematics::{JointKind, KinematicTree, TreeJoint};
 pub struct SteeringCoupling {
     /// The wheel's velocity joint (`wheel0/wheel_left`).
     pub wheel_joint: String,
-    /// The position joint the wheel module hangs from (`leg0/joint7`).
-    pub steering_joint: String,
     /// Wheel rate per turn rate of its module about the steering axis [(rad/s) / (rad/s)],
     /// both about their own axes.
     pub gain: f64,
@@ -27,10 +25,18 @@ pub struct SteeringCoupling {
     /// it turns the wheel module as the joint does.
     pub axis_b: Vector3<f64>,
     /// Every actuated revolute position joint above the module that turns it about the
-    /// steering axis, nearest first (the steering joint), with its share: its own axis dotted
-    /// with the steering axis at home (shares below 1e-6 are left out). Tricycle's legs:
+    /// steering axis, nearest first (the steering joint, share 1), with its share: its own axis
+    /// dotted with the steering axis at home (shares below 1e-6 are left out). Tricycle's legs:
     /// `joint7` and `joint5`, both 1.
     pub turning_joints: Vec<(String, f64)>,
+}
+
+impl SteeringCoupling {
+    /// The position joint the wheel module hangs from (`leg0/joint7`): the nearest of its
+    /// turning joints.
+    pub fn steering_joint(&self) -> &str {
+        &self.turning_joints[0].0
+    }
 }
 
 /// Gains below this are geometry that does not carry the wheel along its rolling direction (a
@@ -103,7 +109,6 @@ impl RobotModel {
                 if gain.abs() >= MIN_GAIN {
                     out.push(SteeringCoupling {
                         wheel_joint: wheel.joint.clone(),
-                        steering_joint: s.name.clone(),
                         gain,
                         axis_b: axis,
                         turning_joints: turning_joints.clone(),

@@ -398,7 +398,7 @@ follow_steering = true
     let model = kumi_model::assemble(&Morphology::parse(FILE, text, &library).unwrap(), &library);
     let couplings = model.steering_couplings();
     assert_eq!(couplings.len(), 2, "{couplings:?}");
-    assert!(couplings.iter().all(|c| c.steering_joint == "leg/joint7"));
+    assert!(couplings.iter().all(|c| c.steering_joint() == "leg/joint7"));
     // The two wheels roll opposite ways, by half the track over the radius.
     assert!((couplings[0].gain + couplings[1].gain).abs() < 1e-9);
     assert!((couplings[0].gain.abs() - 0.286 / 0.27).abs() < 1e-9);

@@ -127,7 +127,7 @@ fn tricycles_wheels_follow_their_legs_turns_about_the_vertical_and_the_others_ha
     for c in &couplings {
         let leg = c.wheel_joint.replace("wheel", "leg");
         let leg = leg.split('/').next().unwrap();
-        assert_eq!(c.steering_joint, format!("{leg}/joint7"), "{c:?}");
+        assert_eq!(c.steering_joint(), format!("{leg}/joint7"), "{c:?}");
         // Half the track (0.286 m) over the tyre radius (0.27 m), the left wheel forward when
         // the roll is positive: the tip roll's axis points down the leg's last link.
         let expected = if c.wheel_joint.ends_with("wheel_left") {

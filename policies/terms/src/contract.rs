@@ -94,7 +94,12 @@ pub fn morphology_fingerprint(model: &RobotModel) -> String {
         let a = c.axis_b;
         text.push_str(&format!(
             "\nsteer:{}<-{}:{:.9}:turn[{:.6},{:.6},{:.6}]",
-            c.wheel_joint, c.steering_joint, c.gain, a.x, a.y, a.z
+            c.wheel_joint,
+            c.steering_joint(),
+            c.gain,
+            a.x,
+            a.y,
+            a.z
         ));
         for (joint, share) in &c.turning_joints {
             text.push_str(&format!(":{joint}*{share:.6}"));

@@ -279,6 +279,24 @@ mod tests {
         assemble(&load_morphology(name, &library).unwrap(), &library)
     }
 
+    /// The shipped robot `name`, a servo bank for it and its home joint positions, every
+    /// servo holding them.
+    fn holding(name: &str) -> (RobotModel, ServoBank, Vec<f64>) {
+        let model = model(name);
+        let mut bank = ServoBank::new(&model);
+        let q = home_joint_positions(&model);
+        bank.hold(&q);
+        (model, bank, q)
+    }
+
+    /// The actuator index of `joint` in `bank`.
+    fn actuator(bank: &ServoBank, joint: &str) -> usize {
+        bank.actuators()
+            .iter()
+            .position(|a| a.joint == joint)
+            .unwrap()
+    }
+
     /// Advances every servo one physics step of `dt` [s] at the joint positions `q`, in
     /// actuator order as the engines do; returns each servo's target.
     fn physics_step(bank: &mut ServoBank, q: &[f64], dt: f64) -> Vec<ServoTarget> {
@@ -287,16 +305,11 @@ mod tests {
 
     #[test]
     fn a_wheel_follows_its_steering_commands_rate_for_one_command_period() {
-        let model = model("tricycle");
-        let mut bank = ServoBank::new(&model);
-        let q = home_joint_positions(&model);
-        bank.hold(&q);
-        let actuators = bank.actuators().to_vec();
-        let index = |joint: &str| actuators.iter().position(|a| a.joint == joint).unwrap();
+        let (_, mut bank, q) = holding("tricycle");
         let (roll, left, right) = (
-            index("leg0/joint7"),
-            index("wheel0/wheel_left"),
-            index("wheel0/wheel_right"),
+            actuator(&bank, "leg0/joint7"),
+            actuator(&bank, "wheel0/wheel_left"),
+            actuator(&bank, "wheel0/wheel_right"),
         );
         let gain = 0.286 / 0.27;
         let sign = bank.drive_sign("wheel0").unwrap();
@@ -332,21 +345,17 @@ mod tests {
         let t = physics_step(&mut bank, &q, dt);
         assert_eq!((t[left].velocity, t[right].velocity), (sign, sign));
         // Other wheel modules do not follow leg0.
-        assert_eq!(t[index("wheel1/wheel_left")].velocity, 0.0);
+        assert_eq!(t[actuator(&bank, "wheel1/wheel_left")].velocity, 0.0);
     }
 
     #[test]
     fn a_wheel_follows_every_turn_of_its_module_about_the_steering_axis() {
-        let model = model("tricycle");
-        let mut bank = ServoBank::new(&model);
-        let q = home_joint_positions(&model);
-        bank.hold(&q);
-        let index = |joint: &str| bank.actuators().iter().position(|a| a.joint == joint);
+        let (model, mut bank, q) = holding("tricycle");
         let (roll, joint5, left, right) = (
-            index("leg0/joint7").unwrap(),
-            index("leg0/joint5").unwrap(),
-            index("wheel0/wheel_left").unwrap(),
-            index("wheel0/wheel_right").unwrap(),
+            actuator(&bank, "leg0/joint7"),
+            actuator(&bank, "leg0/joint5"),
+            actuator(&bank, "wheel0/wheel_left"),
+            actuator(&bank, "wheel0/wheel_right"),
         );
         // Tricycle's leg tips steer about the vertical, pointing down at home.
         let coupling = &model.steering_couplings()[0];
@@ -394,15 +403,8 @@ mod tests {
 
     #[test]
     fn a_following_wheel_stays_within_its_velocity_limit() {
-        let model = model("tricycle");
-        let mut bank = ServoBank::new(&model);
-        let q = home_joint_positions(&model);
-        bank.hold(&q);
-        let left = bank
-            .actuators()
-            .iter()
-            .position(|a| a.joint == "wheel0/wheel_left")
-            .unwrap();
+        let (_, mut bank, q) = holding("tricycle");
+        let left = actuator(&bank, "wheel0/wheel_left");
         let limit = bank.actuators()[left].velocity_limit;
         let sign = bank.drive_sign("wheel0").unwrap();
         bank.set(
@@ -427,10 +429,7 @@ mod tests {
     #[test]
     fn wheels_of_robots_without_follow_steering_take_their_command_alone() {
         for name in ["minimal", "dragon"] {
-            let model = model(name);
-            let mut bank = ServoBank::new(&model);
-            let q = home_joint_positions(&model);
-            bank.hold(&q);
+            let (model, mut bank, q) = holding(name);
             physics_step(&mut bank, &q, 0.01);
             for m in model.modules.iter().filter(|m| m.kind == "arm") {
                 let mut targets = q[bank.module_range(&m.name).unwrap()].to_vec();
