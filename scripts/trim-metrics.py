@@ -1,7 +1,7 @@
 """Keeps the columns of a training run's metrics.csv that `kumi report compare` plots, with six
 significant digits, for committing beside a shipped policy:
 
-    python3 scripts/trim-metrics.py runs/minimal_flat/metrics.csv policies/curves/minimal_flat.metrics.csv
+    python3 scripts/trim-metrics.py runs/minimal_flat/metrics.csv policies/minimal_flat/metrics.csv
 """
 import csv
 import sys

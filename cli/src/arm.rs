@@ -39,7 +39,7 @@ pub struct ArmArgs {
     /// (default: the robot name).
     #[arg(long)]
     pub morphology: Option<String>,
-    /// The ONNX skill policy (default: the shipped policies/arm_reach.onnx).
+    /// The ONNX skill policy (default: the shipped policies/arm_reach/arm_reach.onnx).
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// Inference backend: auto (ONNX Runtime when ORT_DYLIB_PATH is set, else tract),

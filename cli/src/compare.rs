@@ -36,9 +36,10 @@ pub struct CompareArgs {
     /// Where the report (README.md) and its figures go.
     #[arg(long, default_value = "reports/compare")]
     pub out: PathBuf,
-    /// Where the learning curves are: `<policy name>.metrics.csv` (the columns of a training
-    /// run's metrics.csv, e.g. `runs/minimal_flat/metrics.csv`).
-    #[arg(long, default_value = "policies/curves")]
+    /// Where the learning curves are: `DIR/<policy name>/metrics.csv`, as the shipped policies'
+    /// folders hold them and as training writes them (`--curves runs` reads
+    /// `runs/minimal_flat/metrics.csv`).
+    #[arg(long, default_value = "policies")]
     pub curves: PathBuf,
 }
 
@@ -109,7 +110,8 @@ pub fn run(args: CompareArgs) -> Result<()> {
             }
             let csv = args
                 .curves
-                .join(format!("{}.metrics.csv", variant.policy_name(robot)));
+                .join(variant.policy_name(robot))
+                .join("metrics.csv");
             match std::fs::read_to_string(&csv) {
                 Ok(text) => curves.push(
                     read_curve(robot, variant, &text)
@@ -656,8 +658,8 @@ mod tests {
         for robot in &cli.args.morphologies {
             for variant in VARIANTS {
                 let eval = eval_args(&cli.args, robot, variant);
-                // No pushes, and none asked for: no interval needed (stop 65's review found
-                // every comparison refused when the interval was checked without pushes).
+                // No pushes, and none asked for: no interval needed (an interval checked
+                // without pushes would refuse every comparison).
                 assert!(eval.push().unwrap().is_none(), "{robot} {variant}");
             }
         }

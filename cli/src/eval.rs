@@ -33,7 +33,7 @@ pub struct EvalBodyArgs {
     #[arg(long, value_enum, default_value_t)]
     pub variant: crate::train::Variant,
     /// The ONNX policy (default: the shipped one of the variant, e.g.
-    /// policies/<robot>_whole_body.onnx or policies/<robot>_flat.onnx).
+    /// policies/<robot>_whole_body/<robot>_whole_body.onnx or policies/<robot>_flat/<robot>_flat.onnx).
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// The training config the policy was trained with (task and action bounds; default:
@@ -41,7 +41,7 @@ pub struct EvalBodyArgs {
     /// train/configs/whole_body/tricycle_sixth.toml).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// The frozen skill (default: the shipped policies/arm_reach.onnx).
+    /// The frozen skill (default: the shipped policies/arm_reach/arm_reach.onnx).
     #[arg(long)]
     pub skill: Option<PathBuf>,
     /// Episodes to evaluate.
@@ -431,7 +431,7 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
 
 #[derive(Args, Debug)]
 pub struct EvalArmArgs {
-    /// The ONNX policy (default: the shipped policies/arm_reach.onnx).
+    /// The ONNX policy (default: the shipped policies/arm_reach/arm_reach.onnx).
     #[arg(long)]
     pub policy: Option<PathBuf>,
     /// Goals to evaluate.

@@ -43,10 +43,10 @@ pub struct LaunchArgs {
     /// No whole-body node: arm goals come from elsewhere (`ros2 topic pub`).
     #[arg(long)]
     pub no_whole_body: bool,
-    /// The whole-body policy (default: the shipped policies/<morphology>_whole_body.onnx).
+    /// The whole-body policy (default: the shipped policies/<morphology>_whole_body/<morphology>_whole_body.onnx).
     #[arg(long)]
     pub policy: Option<PathBuf>,
-    /// The skill every arm node runs (default: the shipped policies/arm_reach.onnx).
+    /// The skill every arm node runs (default: the shipped policies/arm_reach/arm_reach.onnx).
     #[arg(long)]
     pub skill: Option<PathBuf>,
     /// Inference backend of every node: auto (ONNX Runtime when ORT_DYLIB_PATH is set, else

@@ -2,8 +2,8 @@
 //!
 //! `restamp`: moves a whole-body policy to its robot as it is now, without retraining. A
 //! policy's contract carries the fingerprint of the robot it was trained on, and loading
-//! refuses it on any other. When the robot changes in a way the policy may still serve (stop
-//! 66: Tricycle's wheels came to follow their legs' steering), this writes the current
+//! refuses it on any other. When the robot changes in a way the policy may still serve (such as
+//! Tricycle's wheels following their legs' steering, `follow_steering`), this writes the current
 //! fingerprint and keeps the one it was trained on under
 //! `kumi.trained_morphology_fingerprint`, so the file says both. What the policy does on the
 //! changed robot is then for `kumi eval whole-body` to measure.

@@ -97,7 +97,7 @@ pub struct TrainBodyArgs {
     /// train/configs/whole_body/<morphology>.toml; required for another).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// The frozen skill every arm module runs (default: the shipped policies/arm_reach.onnx).
+    /// The frozen skill every arm module runs (default: the shipped policies/arm_reach/arm_reach.onnx).
     #[arg(long)]
     pub skill: Option<PathBuf>,
     /// The policy to train: over the skill, or a baseline (its default config is
@@ -133,7 +133,7 @@ pub enum Variant {
 }
 
 impl Variant {
-    /// The policy's name: `<robot>_whole_body`, `<robot>_flat` or `<robot>_penalty` (its file
+    /// The policy's name: `<robot>_whole_body`, `<robot>_flat` or `<robot>_penalty` (its folder
     /// in `policies/`, its run directory under `runs/`).
     pub fn policy_name(self, robot: &str) -> String {
         match self {
@@ -145,8 +145,7 @@ impl Variant {
 
     /// The shipped policy file of this variant for `robot`.
     pub fn shipped_policy(self, robot: &str) -> PathBuf {
-        kumi_runtime::shipped_arm_policy()
-            .with_file_name(format!("{}.onnx", self.policy_name(robot)))
+        kumi_runtime::shipped_policy(&self.policy_name(robot))
     }
 
     fn config_dir(self) -> &'static str {

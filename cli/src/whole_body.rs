@@ -20,10 +20,10 @@ pub struct WholeBodyArgs {
     /// (default: the robot name).
     #[arg(long)]
     pub morphology: Option<String>,
-    /// The whole-body ONNX policy (default: the shipped policies/<morphology>_whole_body.onnx).
+    /// The whole-body ONNX policy (default: the shipped policies/<morphology>_whole_body/<morphology>_whole_body.onnx).
     #[arg(long)]
     pub policy: Option<PathBuf>,
-    /// The skill the arm nodes run (default: the shipped policies/arm_reach.onnx); the policy
+    /// The skill the arm nodes run (default: the shipped policies/arm_reach/arm_reach.onnx); the policy
     /// must have been trained over it.
     #[arg(long)]
     pub skill: Option<PathBuf>,

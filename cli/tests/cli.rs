@@ -850,7 +850,7 @@ mod mujoco {
 
     #[test]
     fn the_shipped_tricycle_checkpoint_exports_the_shipped_policy() {
-        // policies/checkpoints/tricycle_whole_body is the training state of the shipped policy
+        // policies/tricycle_whole_body/checkpoint is the training state of the shipped policy
         // after its last stage. Resumed with that stage's config it has no step left to train
         // and exports the shipped file byte for byte: a later stage goes on from the shipped
         // policy itself, not from a retrained copy.
@@ -864,16 +864,18 @@ mod mujoco {
             "--config",
             &path("train/configs/whole_body/tricycle_sixth.toml"),
             "--resume",
-            &path("policies/checkpoints/tricycle_whole_body"),
+            &path("policies/tricycle_whole_body/checkpoint"),
             "--out",
             out_dir.to_str().unwrap(),
         ]);
         let exported = std::fs::read(out_dir.join("tricycle_whole_body.onnx")).unwrap();
-        let shipped = std::fs::read(root.join("policies/tricycle_whole_body.onnx")).unwrap();
+        let shipped =
+            std::fs::read(root.join("policies/tricycle_whole_body/tricycle_whole_body.onnx"))
+                .unwrap();
         std::fs::remove_dir_all(&out_dir).unwrap();
         assert!(
             shipped == exported,
-            "the checkpoint exports another policy than policies/tricycle_whole_body.onnx"
+            "the checkpoint exports another policy than policies/tricycle_whole_body/tricycle_whole_body.onnx"
         );
     }
 }
@@ -929,7 +931,8 @@ fn restamp_moves_a_policy_to_its_robot_as_it_is_and_keeps_what_it_was_trained_on
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let dir = std::env::temp_dir().join(format!("kumi-restamp-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let shipped = std::fs::read(root.join("policies/minimal_whole_body.onnx")).unwrap();
+    let shipped =
+        std::fs::read(root.join("policies/minimal_whole_body/minimal_whole_body.onnx")).unwrap();
     let file = |b: &[u8]| kumi_runtime::ModelFile::decode(b.to_vec()).unwrap();
     let current = file(&shipped).metadata[MORPHOLOGY_FINGERPRINT].clone();
     // A policy trained on an older Minimal: loading refuses it by its fingerprint.
@@ -986,7 +989,9 @@ fn restamp_moves_a_policy_to_its_robot_as_it_is_and_keeps_what_it_was_trained_on
     let skill = kumi(&[
         "policy",
         "restamp",
-        root.join("policies/arm_reach.onnx").to_str().unwrap(),
+        root.join("policies/arm_reach/arm_reach.onnx")
+            .to_str()
+            .unwrap(),
     ]);
     assert!(!skill.status.success());
     assert!(String::from_utf8_lossy(&skill.stderr).contains("not a whole-body policy"));

@@ -176,7 +176,7 @@ fn a_launched_minimal_reaches_a_target_from_rclpy_and_replays_the_in_process_epi
         "the NaN and wrong-frame targets: {d}"
     );
     assert_eq!(number(&d["unsynchronised_ticks"]), 0.0, "{d}");
-    // The bound: Minimal's mean final error over 1000 rapier rollouts (policies/minimal_whole_body.md).
+    // The bound: Minimal's mean final error over 1000 rapier rollouts (policies/minimal_whole_body/README.md).
     assert!(error < 0.121, "{out}");
 
     // The same episode in process, from the tick the node first ran the policy on.
@@ -413,7 +413,7 @@ mod on_mujoco {
     }
 
     /// Dragon runs on MuJoCo: its policy was trained there and does not carry over to rapier
-    /// (policies/dragon_whole_body.md).
+    /// (policies/dragon_whole_body/README.md).
     #[test]
     fn a_launched_dragon_reaches_a_target_from_rclpy_on_mujoco() {
         let _one = one_at_a_time();
@@ -421,7 +421,7 @@ mod on_mujoco {
         // home tool is at its full reach: a tighter reach check once refused all of its goals).
         let (out, error, _launch) = reach_on_mujoco("dragon", &["arm0", "leg0"]);
         // The bound: the 90th percentile of Dragon's final error over 1000 MuJoCo rollouts
-        // (0.42 m, policies/dragon_whole_body.md). The episode is not the same on every run: the
+        // (0.42 m, policies/dragon_whole_body/README.md). The episode is not the same on every run: the
         // robot settles on its wheels while it waits, and the target lands on whichever tick the
         // peer gets to (0.06, 0.09 and 0.13 m measured). A robot whose goals went astray ends
         // metres away.
@@ -430,7 +430,7 @@ mod on_mujoco {
 
     /// The 99th percentile of Tricycle's closest approach [m] to its target over the MuJoCo
     /// rollouts that started within 1.5 m of it, as this target does (0.1552 m over 180 of 1000,
-    /// median 0.0315 m, p90 0.0703 m; policies/tricycle_whole_body.md). One run is one draw of
+    /// median 0.0315 m, p90 0.0703 m; policies/tricycle_whole_body/README.md). One run is one draw of
     /// that spread, so the bound is its far tail, not its p90: a robot whose goals went astray,
     /// or that fell on the way, comes nowhere near a target 1.1 m off. The closest approach, not
     /// the final error: Tricycle comes close and then wanders near the target (an earlier

@@ -18,7 +18,7 @@ pub const ACTION_LIMIT: f64 = 1.0;
 /// How many of `action`'s values lie past +-[`ACTION_LIMIT`], where clipping makes them all
 /// the largest increment. A skill whose mean actions mostly lie there acts as a relay: around a
 /// goal it has reached it swings between its largest increments instead of settling
-/// (`policies/arm_reach.md`). Non-finite values are not counted (they hold).
+/// (`policies/arm_reach/README.md`). Non-finite values are not counted (they hold).
 pub fn values_past_limit(action: &[f32]) -> usize {
     action
         .iter()

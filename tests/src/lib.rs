@@ -312,7 +312,7 @@ pub const ARM_GOAL_2: [f64; 7] = [0.3, -0.15, 0.85, 0.968_912_4, 0.247_403_96, 0
 
 /// How close the tool must end [m]: the shipped skill's accuracy over ROS, not better than the
 /// skill itself. Over 1000 goals of the paper's box in rapier its final position error has mean
-/// 0.10 m and p90 0.17 m (`policies/arm_reach.md`); over ROS it ends 0.10 m from
+/// 0.10 m and p90 0.17 m (`policies/arm_reach/README.md`); over ROS it ends 0.10 m from
 /// [`ARM_GOAL`]. (The skill before working starts ended within 5 cm there.)
 pub const REACH_BOUND_M: f64 = 0.15;
 

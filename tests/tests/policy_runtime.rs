@@ -197,8 +197,7 @@ fn every_shipped_whole_body_policy_fits_its_robot_and_the_shipped_skill() {
             ("flat", "flat"),
             ("penalty", "penalty"),
         ] {
-            let path =
-                kumi_runtime::shipped_arm_policy().with_file_name(format!("{name}_{file}.onnx"));
+            let path = kumi_runtime::shipped_policy(&format!("{name}_{file}"));
             if !path.exists() {
                 continue;
             }
@@ -244,7 +243,7 @@ fn every_shipped_whole_body_policy_fits_its_robot_and_the_shipped_skill() {
             loaded.push(format!("{name}_{file}"));
         }
     }
-    // Minimal's is shipped (policies/minimal_whole_body.md); the others join as they are.
+    // Minimal's is shipped (policies/minimal_whole_body/README.md); the others join as they are.
     assert!(
         loaded.contains(&"minimal_whole_body".to_string()),
         "{loaded:?}"

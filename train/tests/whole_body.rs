@@ -698,11 +698,12 @@ fn the_shipped_skill_holds_every_module_at_its_home() {
     // The upper level's zero action asks each module for its home tool pose, where it already
     // stands. A skill trained only from starts near zero swung a leg's elbow through 1.5 rad
     // first (excursions of 0.33-0.44 m) and Tricycle collapsed: the skill must hold instead.
-    // It holds, but not still: on some machines (AMD EPYC with AVX-512, stop 39) Tricycle's leg2
-    // dithers with a growing swing that reaches 0.22 m near the end of the 3 s, where others
-    // stay within 0.1 m: the closed loop is chaotic, and floating-point kernels that differ in
-    // their last bits send it elsewhere. The bounds hold the start and the typical excursion
-    // to 0.1 m and the largest to 0.3 m, below the old skill's swing, on every machine.
+    // It holds, but not still: on some machines (AMD EPYC with AVX-512; the skill's model card,
+    // policies/arm_reach/README.md) Tricycle's leg2 dithers with a growing swing that reaches
+    // 0.22 m near the end of the 3 s, where others stay within 0.1 m: the closed loop is
+    // chaotic, and floating-point kernels that differ in their last bits send it elsewhere. The
+    // bounds hold the start and the typical excursion to 0.1 m and the largest to 0.3 m, below
+    // that skill's 0.33-0.44 m swing, on every machine.
     let library = ModuleLibrary::shipped();
     for robot in ["minimal", "dragon", "tricycle"] {
         let m = assemble(&load_morphology(robot, &library).unwrap(), &library);
@@ -1007,8 +1008,8 @@ fn training_noise_moves_only_the_noised_slots_and_never_the_episode() {
 #[test]
 fn a_step_whose_physics_blew_up_ends_the_episode_with_the_fall_penalty_alone() {
     // A rapier world that blew up once gave a training batch rewards summing to -3.6e20 through
-    // the joint-speed penalty (stop 52). Now either engine flags the blow-up, and the
-    // environment scores nothing from the lost state.
+    // the joint-speed penalty (docs/notebook/tricycle_whole_body_runs.md). Either engine flags
+    // the blow-up, and the environment scores nothing from the lost state.
     let mut c = config(1.5);
     c.weights.fall = 20.0;
     c.weights.alive = 0.5;

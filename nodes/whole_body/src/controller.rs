@@ -339,7 +339,8 @@ mod tests {
         )
     }
 
-    /// Tricycle's shipped goal bounds without its turn governor (0.1 m/s^2 since stop 30), no ramp.
+    /// Tricycle's shipped goal bounds without its turn governor (0.07 m/s^2 in the shipped policy:
+    /// train/configs/whole_body/tricycle_sixth.toml), no ramp.
     const BOUNDS: GoalBounds = GoalBounds {
         manipulator_position_m: 0.25,
         manipulator_rotation_rad: 0.5,

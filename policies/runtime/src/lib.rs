@@ -18,17 +18,32 @@ pub use model_file::{MissingKey, ModelFile, TensorShape};
 pub use onnxruntime::{ort_library_from_env, ORT_DYLIB_PATH};
 pub use policy::{Backend, BackendChoice, Network, RuntimeError, SkillPolicy, WholeBodyPolicy};
 
-/// The shipped low-level skill, `policies/arm_reach.onnx` in the source tree.
-pub fn shipped_arm_policy() -> std::path::PathBuf {
+/// The folder of the shipped policies, `policies/` in the source tree: one folder per policy
+/// (`policies/<name>/`: the ONNX file, its model card `README.md`, its learning curve
+/// `metrics.csv`).
+pub fn shipped_policies_dir() -> std::path::PathBuf {
     let runtime_crate = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     runtime_crate
         .parent()
         .unwrap_or(runtime_crate)
-        .join("arm_reach.onnx")
+        .to_path_buf()
 }
 
-/// The shipped whole-body policy of a robot, `policies/<robot>_whole_body.onnx` in the source
-/// tree.
+/// The shipped policy called `name` (`arm_reach`, `<robot>_whole_body`, `<robot>_flat`, ...),
+/// `policies/<name>/<name>.onnx` in the source tree.
+pub fn shipped_policy(name: &str) -> std::path::PathBuf {
+    shipped_policies_dir()
+        .join(name)
+        .join(format!("{name}.onnx"))
+}
+
+/// The shipped low-level skill, `policies/arm_reach/arm_reach.onnx` in the source tree.
+pub fn shipped_arm_policy() -> std::path::PathBuf {
+    shipped_policy("arm_reach")
+}
+
+/// The shipped whole-body policy of a robot,
+/// `policies/<robot>_whole_body/<robot>_whole_body.onnx` in the source tree.
 pub fn shipped_whole_body_policy(robot: &str) -> std::path::PathBuf {
-    shipped_arm_policy().with_file_name(format!("{robot}_whole_body.onnx"))
+    shipped_policy(&format!("{robot}_whole_body"))
 }

@@ -5,7 +5,7 @@
 //! finite: its `mjMAXVAL`), and restarts from its initial state; rapier notices none. A rapier
 //! world that blew up once gave a training batch rewards summing to -3.6e20 (joint speeds of the
 //! order of 1e12 rad/s through the joint-speed penalty) while a Tricycle policy trained in it
-//! (stop 52, `policies/tricycle_whole_body.runs.md`). Long before 1e10, a state is not one these
+//! (`docs/notebook/tricycle_whole_body_runs.md`). Long before 1e10, a state is not one these
 //! robots can be in: the bounds below sit far above any speed their modules reach, so that a
 //! world that passes them is taken as lost.
 

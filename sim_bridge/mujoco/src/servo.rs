@@ -10,7 +10,7 @@
 //! starting velocity, `spring - D v`, exceeds the effort limit, spring and damping are both
 //! scaled down by the same factor, so the torque is the limit and the damping stays implicit.
 //!
-//! Two earlier laws failed near the limit. Switching the damping off whenever a one-dof
+//! Two other laws fail near the limit. Switching the damping off whenever a one-dof
 //! prediction of `v'` put the servo over its limit chattered on closed chains, where that
 //! prediction cannot see contacts (Tricycle's loaded legs at 5-30 rad/s). Keeping the whole
 //! damping implicit and clamping the spring to `D v +- effort` put an explicit `D v` on the

@@ -109,9 +109,10 @@ fn joint_steps_agree_between_engines() {
             // it falls, saturated, until the slewed set-point catches it, and the engines'
             // clamped motors part there: rapier's gives exactly the limit, MuJoCo's scaled servo
             // the limit plus a little damping against the fall (measured 65.4 mm at the worst
-            // step, 2.8 mm settled; 49 mm with MuJoCo's earlier law, which chattered on legs).
-            // On the mobile robots the base rocks on its contacts during the transient too
-            // (measured worst 14.0 mm, Dragon's joint2; 25.8 mm under MuJoCo's earlier servo law): 3 cm there.
+            // step, 2.8 mm settled; 49 mm under a law that switched the damping off at the limit,
+            // which chattered on legs: sim_bridge/mujoco/src/servo.rs). On the mobile robots the
+            // base rocks on its contacts during the transient too (measured worst 14.0 mm,
+            // Dragon's joint2; 25.8 mm under the switching law): 3 cm there.
             let bound = match (name, joint) {
                 ("arm", 1) => 0.07,
                 ("arm", _) => 0.02,
