@@ -51,7 +51,7 @@ pub struct Record {
     pub per_s: f64,
 }
 
-/// The networks measured: the skill's (SPEC Table II) and a whole-body-sized one.
+/// The networks measured: the skill's (the paper's Table II) and a whole-body-sized one.
 const NETS: [(usize, usize, [usize; 2]); 2] = [(21, 7, [256, 128]), (64, 24, [512, 256])];
 
 fn net_name(obs: usize, act: usize, hidden: &[usize]) -> String {

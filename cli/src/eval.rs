@@ -18,10 +18,10 @@ use crate::sim::load_model;
 
 #[derive(Subcommand, Debug)]
 pub enum EvalCommand {
-    /// The low-level skill: final tool errors at the end of each 4 s goal (SPEC section 4).
+    /// The low-level skill: final tool errors at the end of each 4 s goal (the paper's section IV-A).
     Arm(EvalArmArgs),
     /// A whole-body policy over the frozen skill: final tool errors, leg orientation,
-    /// undesired contacts and falls over whole episodes (SPEC section 6).
+    /// undesired contacts and falls over whole episodes (the paper's section V-C).
     WholeBody(EvalBodyArgs),
 }
 

@@ -50,9 +50,9 @@ use crate::sim::load_model;
 
 #[derive(Subcommand, Debug)]
 pub enum TrainCommand {
-    /// The low-level skill: one fixed-base arm reaching goals (SPEC section 4).
+    /// The low-level skill: one fixed-base arm reaching goals (the paper's section IV-A).
     Arm(TrainArmArgs),
-    /// An upper-level policy over the frozen skill for one morphology (SPEC section 5).
+    /// An upper-level policy over the frozen skill for one morphology (the paper's section IV-B).
     WholeBody(TrainBodyArgs),
 }
 
@@ -126,7 +126,7 @@ pub enum Variant {
     /// Goals for the frozen skill per arm module, velocities per wheel module.
     #[default]
     Hierarchical,
-    /// Every arm joint's position target directly (SPEC section 6).
+    /// Every arm joint's position target directly (the paper's section V-C).
     Flat,
     /// Flat, with the leg-orientation reward and contact penalty (Eqs. 5, 6).
     Penalty,

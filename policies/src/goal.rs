@@ -1,4 +1,4 @@
-//! Reaching goals (SPEC section 4): sampled in the arm base frame every 4 s, with a little noise
+//! Reaching goals (the paper's section IV-A): sampled in the arm base frame every 4 s, with a little noise
 //! added at every step to emulate an upper level that keeps moving them.
 
 use nalgebra::{UnitQuaternion, Vector3};

@@ -301,7 +301,7 @@ impl Drop for ArmNode {
     }
 }
 
-/// A goal inside the skill's training distribution (SPEC section 4: position box, pitch within
+/// A goal inside the skill's training distribution (the paper's section IV-A: position box, pitch within
 /// pi/3, yaw 0) for the single-arm robot: x, y, z [m], then the quaternion w, x, y, z (roll
 /// 0.5 rad about the tool's x axis).
 pub const ARM_GOAL: [f64; 7] = [0.35, 0.1, 1.0, 0.968_912_4, 0.247_403_96, 0.0, 0.0];

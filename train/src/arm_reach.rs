@@ -1,4 +1,4 @@
-//! The low-level environment (SPEC section 4): one arm module with its base fixed, reaching
+//! The low-level environment (the paper's section IV-A): one arm module with its base fixed, reaching
 //! goals in its base frame. A thin shell: observation, action and reward are the shared pure
 //! functions of `kumi-policies` and [`crate::reward`]; physics is any engine of `kumi-worlds`.
 

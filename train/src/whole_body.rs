@@ -1,10 +1,10 @@
-//! The upper-level environment (SPEC section 5, the paper's section IV-B), generated from any
+//! The upper-level environment (the paper's section IV-B), generated from any
 //! morphology with one manipulator: the robot stands at a random pose, a target (position and
 //! yaw) is drawn around it, and the policy commands the frozen skill of every arm module and
 //! the velocity of every wheel module through the action terms of `kumi-terms`. A thin shell:
 //! observation, action terms and reward are shared pure functions; physics is any engine.
 //!
-//! The flat baseline (SPEC section 6) is the same environment with other terms: every arm
+//! The flat baseline (the paper's section V-C) is the same environment with other terms: every arm
 //! joint's position target directly, and every arm module's joint state added to the
 //! observation ([`ArmControl::Joints`]); the penalty baseline adds Eqs. 5 and 6 to its reward
 //! ([`PenaltyWeights`]).

@@ -1,5 +1,5 @@
 //! The whole-body environment: built from any morphology, its frozen-skill term feeds each arm
-//! module exactly what the skill was trained on, episodes end as SPEC section 5 says.
+//! module exactly what the skill was trained on, episodes end as the paper's section IV-B says.
 
 use std::sync::Arc;
 
@@ -403,7 +403,7 @@ fn sizes_follow_the_morphology_and_episodes_time_out() {
 
 #[test]
 fn the_flat_baseline_is_the_same_environment_with_joint_targets_and_the_arms_state() {
-    // SPEC section 6: every arm joint's target (7 per arm module) and a velocity per wheel
+    // the paper's section V-C: every arm joint's target (7 per arm module) and a velocity per wheel
     // module; the observation is the upper level's plus every arm joint's angle and velocity.
     let flat = |engine_config: WholeBodyConfig| WholeBodyConfig {
         arms: ArmControl::Joints(JointBounds {

@@ -1,4 +1,4 @@
-//! The arm-module node (SPEC section 7): one per arm module, running the shared low-level skill.
+//! The arm-module node: one per arm module, running the shared low-level skill.
 //!
 //! - [`goal`]: validating a `geometry_msgs/PoseStamped` goal (frame, finiteness, quaternion,
 //!   workspace).

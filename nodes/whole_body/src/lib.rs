@@ -1,4 +1,4 @@
-//! The whole-body node (SPEC section 7): one per robot, running its upper-level policy over
+//! The whole-body node: one per robot, running its upper-level policy over
 //! the arm nodes' frozen skill.
 //!
 //! - [`target`]: validating the `geometry_msgs/PoseStamped` target (frame, finiteness,

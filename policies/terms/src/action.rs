@@ -331,7 +331,7 @@ impl ArmGoalTerm {
     }
 }
 
-/// The flat baseline's arm term (SPEC section 6): an arm module's seven joints commanded
+/// The flat baseline's arm term (the paper's section V-C): an arm module's seven joints commanded
 /// directly, no skill between. Each action value moves its joint's absolute position target
 /// from the home angle by up to `scale_rad`; the servos clamp to the joint range and slew as
 /// they do for the skill's increments.
@@ -460,7 +460,7 @@ impl ActionTerms {
         })
     }
 
-    /// The flat baseline's terms (SPEC section 6): every arm joint's position target directly,
+    /// The flat baseline's terms (the paper's section V-C): every arm joint's position target directly,
     /// a velocity per wheel module.
     pub fn flat(model: &RobotModel, bounds: &JointBounds) -> Result<Self, TermError> {
         bounds.check()?;

@@ -1,4 +1,4 @@
-//! The whole-body (upper-level) policy's interface (SPEC section 5, the paper's Tables III and
+//! The whole-body (upper-level) policy's interface (the paper's section IV-B, its Tables III and
 //! V), defined once and used by training, evaluation and the whole-body node alike:
 //!
 //! - [`action`]: the action terms, derived from any morphology: a goal for the frozen skill per

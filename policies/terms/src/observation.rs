@@ -95,7 +95,7 @@ pub fn slots(
     slots
 }
 
-/// The flat baseline's slots (SPEC section 6): the upper-level `slots` followed by every arm
+/// The flat baseline's slots (the paper's section V-C): the upper-level `slots` followed by every arm
 /// module's low-level state, `arm_joints` joint angles and as many velocities (none: the
 /// slots unchanged).
 pub fn with_arm_state(mut slots: Vec<ObservationSlot>, arm_joints: usize) -> Vec<ObservationSlot> {

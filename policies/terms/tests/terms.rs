@@ -256,7 +256,7 @@ fn bounds_read_back_from_the_action_description() {
 
 #[test]
 fn flat_terms_command_every_arm_joint_around_home_by_hand() {
-    // The flat baseline (SPEC section 6): 7 joint targets per arm module, one velocity per
+    // The flat baseline (the paper's section V-C): 7 joint targets per arm module, one velocity per
     // wheel module. Tricycle: 4 arms, 3 wheel modules.
     let model = robot("tricycle");
     let terms = ActionTerms::flat(
