@@ -101,7 +101,7 @@ pub struct SimArgs {
     /// their servos. Does the robot stand on the skill?
     #[arg(long, value_delimiter = ',')]
     pub skill_on: Vec<String>,
-    /// The skill for `--skill-on` (default: the shipped policies/arm_reach.onnx).
+    /// The skill for `--skill-on` (default: the shipped policies/arm_reach/arm_reach.onnx).
     #[arg(long)]
     pub skill: Option<std::path::PathBuf>,
     /// Legs on the skill are asked to roll their tools by this angle [rad] about the tool's own
@@ -260,6 +260,11 @@ struct SimReport {
     max_mount_error_m: f64,
     max_mount_error_rad: f64,
     max_joint_speed_rad_s: f64,
+    /// The arm joints' speeds after the first second (the start's transient): their mean and
+    /// largest absolute value over every arm joint and control step [rad/s]
+    /// (`kumi_policies::settle::SpeedTally`; NaN for a run no longer than a second).
+    arm_joint_speed_after_1s_mean_rad_s: f64,
+    arm_joint_speed_after_1s_max_rad_s: f64,
     finite: bool,
     ground_contacts_at_end: Vec<String>,
     /// Wheel modules with no wheel on the ground, mean over the control steps (0 without
@@ -317,8 +322,15 @@ pub fn run(args: SimArgs) -> Result<()> {
         (0.0_f64, f64::INFINITY, 0.0_f64, 0.0_f64, 0.0_f64);
     let mut finite = true;
     let (mut off_ground, mut all_down) = (0_usize, 0_u64);
+    let arm_joint: Vec<bool> = model
+        .actuators()
+        .map(|a| a.mode == kumi_model::ActuatorMode::Position)
+        .collect();
+    let speed_after_step =
+        (kumi_policies::settle::SPEED_AFTER_S * config.control_hz).round() as u64;
+    let mut arm_speeds = kumi_policies::settle::SpeedTally::default();
     let wall = Instant::now();
-    for _ in 0..steps {
+    for step in 0..steps {
         for driver in drivers.iter_mut() {
             driver.act(world.as_mut())?;
         }
@@ -338,12 +350,21 @@ pub fn run(args: SimArgs) -> Result<()> {
                 .iter()
                 .all(|x| x.is_finite());
         max_speed = v.iter().fold(max_speed, |a, x| a.max(x.abs()));
+        if step >= speed_after_step {
+            arm_speeds.add(
+                v.iter()
+                    .zip(&arm_joint)
+                    .filter(|(_, arm)| **arm)
+                    .map(|(x, _)| *x),
+            );
+        }
         let off = world.wheel_modules_off_ground();
         off_ground += off;
         all_down += u64::from(off == 0);
     }
     let wall_s = wall.elapsed().as_secs_f64();
     let end = world.base_pose().translation.vector;
+    let arm_speeds = arm_speeds.stats();
     let report = SimReport {
         morphology: model.name.clone(),
         engine: engine.to_string(),
@@ -363,6 +384,8 @@ pub fn run(args: SimArgs) -> Result<()> {
         max_mount_error_m: mount_m,
         max_mount_error_rad: mount_rad,
         max_joint_speed_rad_s: max_speed,
+        arm_joint_speed_after_1s_mean_rad_s: arm_speeds.mean,
+        arm_joint_speed_after_1s_max_rad_s: arm_speeds.max,
         finite,
         ground_contacts_at_end: world.ground_contacts(),
         wheel_modules_off_ground_mean: off_ground as f64 / steps.max(1) as f64,
@@ -412,6 +435,10 @@ pub fn run(args: SimArgs) -> Result<()> {
             mount_rad.to_degrees()
         );
         println!("  max joint speed     {:.3} rad/s", max_speed);
+        println!(
+            "  arm joints after 1 s {:.3} rad/s mean, {:.3} rad/s max",
+            arm_speeds.mean, arm_speeds.max
+        );
         println!("  all values finite   {}", finite);
         println!(
             "  touching the ground {}",

@@ -1,6 +1,6 @@
 //! The low-level reaching skill's interface, defined once and used by the training environment
 //! and the arm-module node alike, so that what a policy saw in training is exactly what it is fed
-//! in deployment (SPEC section 4, the paper's Table I).
+//! in deployment (the paper's section IV-A and Table I).
 //!
 //! - [`observation`]: the 21-value observation and its builder.
 //! - [`skill`]: the skill's contract with an arm module (joint order, limits, action scale)
@@ -8,6 +8,8 @@
 //! - [`metadata`]: the keys an exported policy carries.
 //! - [`goal`]: goal sampling in the arm base frame, and per-step goal noise.
 //! - [`rotation`]: the orientation error (the quaternion log map).
+//! - [`settle`]: how calmly the skill holds and reaches a goal (hold smoothness, settle time,
+//!   joint speeds), as evaluation and the standing check report it.
 
 pub mod goal;
 pub mod goals;
@@ -15,4 +17,5 @@ pub mod kinematics;
 pub mod metadata;
 pub mod observation;
 pub mod rotation;
+pub mod settle;
 pub mod skill;

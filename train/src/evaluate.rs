@@ -5,12 +5,18 @@
 //! goal noise as in training); every goal end is one rollout, so later goals start wherever the
 //! arm was left. Episode `k` is seeded by `(seed, k)`, so results do not depend on how many
 //! threads run them.
+//!
+//! Beside the errors it measures how calmly the skill reaches and holds each goal
+//! ([`kumi_policies::settle`]): hold smoothness over the last second of each goal and the
+//! settle time.
 
 use std::sync::Arc;
 
 use kumi_model::RobotModel;
 use kumi_policies::observation::{JOINTS, OBSERVATION_DIM};
+use kumi_policies::settle::{settle_steps, HoldCounts, HOLD_WINDOW_S};
 use kumi_policies::skill::{values_past_limit, ACTION_LIMIT};
+use nalgebra::{UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use crate::arm_reach::{ArmReach, ArmReachConfig, EnvError};
@@ -33,6 +39,11 @@ impl ErrorStats {
             "| {name} | {:.4} | {:.4} | {:.4} | {:.4} |\n",
             s.mean, s.std, s.median, s.p90
         )
+    }
+
+    /// The summary of no values: NaN everywhere.
+    pub fn empty() -> Self {
+        Self::of(&[])
     }
 
     /// The summary of `values` (NaN everywhere if empty).
@@ -104,6 +115,18 @@ pub struct Evaluation {
     /// the goals they did not finish are not among the rollouts.
     #[serde(default)]
     pub diverged_episodes: usize,
+    /// Over the last [`HOLD_WINDOW_S`] of every goal: the mean absolute increment per joint per
+    /// step, as a share (0-1) of the largest increment ([`HoldCounts::mean_increment_share`]).
+    #[serde(default)]
+    pub hold_increment_share: f64,
+    /// Over the same windows: the share (0-1) of steps at which a joint's increment reversed
+    /// sign with a magnitude above 20 % of the largest ([`HoldCounts::reversal_share`]).
+    #[serde(default)]
+    pub hold_reversal_share: f64,
+    /// Seconds from each goal's start until the tool stays within 2 cm and 0.1 rad of where it
+    /// ends ([`settle_steps`]).
+    #[serde(default = "ErrorStats::empty")]
+    pub settle_time_s: ErrorStats,
 }
 
 impl Evaluation {
@@ -111,13 +134,16 @@ impl Evaluation {
     pub fn markdown(&self) -> String {
         let row = ErrorStats::markdown_row;
         format!(
-            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}\naction values past the +-{ACTION_LIMIT} they are clipped to: {:.1} %\n{}",
+            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}{}\naction values past the +-{ACTION_LIMIT} they are clipped to: {:.1} %\nhold, last {HOLD_WINDOW_S} s of each goal: mean increment {:.1} % of the largest; sign reversals above 20 % of it at {:.1} % of the steps\n{}",
             self.rollouts,
             self.goals,
             self.engine,
             row("position [m]", &self.position_error_m),
             row("orientation [rad]", &self.orientation_error_rad),
+            row("settle time [s] (within 2 cm, 0.1 rad of the end)", &self.settle_time_s),
             100.0 * self.action_values_past_limit,
+            100.0 * self.hold_increment_share,
+            100.0 * self.hold_reversal_share,
             match self.diverged_episodes {
                 0 => String::new(),
                 n => format!("episodes cut short by physics that blew up: {n}\n"),
@@ -167,12 +193,17 @@ where
     let values: usize = per_episode.iter().map(|e| e.action_values).sum();
     let past_limit: usize = per_episode.iter().map(|e| e.action_values_past_limit).sum();
     let diverged_episodes = per_episode.iter().filter(|e| e.diverged).count();
-    let ends: Vec<(f64, f64)> = per_episode
+    let goals: Vec<GoalOutcome> = per_episode
         .into_iter()
-        .flat_map(|e| e.ends)
+        .flat_map(|e| e.goals)
         .take(rollouts)
         .collect();
-    let (p, o): (Vec<f64>, Vec<f64>) = ends.iter().copied().unzip();
+    let p: Vec<f64> = goals.iter().map(|g| g.position_error).collect();
+    let o: Vec<f64> = goals.iter().map(|g| g.orientation_error).collect();
+    let settle: Vec<f64> = goals.iter().map(|g| g.settle_time_s).collect();
+    let hold = goals
+        .iter()
+        .fold(HoldCounts::default(), |sum, g| sum + g.hold);
     Ok(Evaluation {
         engine: config.engine.to_string(),
         goals: if config.goals.centres.is_empty() || config.goals.paper_box_weight >= 1.0 {
@@ -182,19 +213,35 @@ where
         } else {
             "mixed".into()
         },
-        rollouts: ends.len(),
+        rollouts: goals.len(),
         position_error_m: ErrorStats::of(&p),
         orientation_error_rad: ErrorStats::of(&o),
         action_values_past_limit: past_limit as f64 / values.max(1) as f64,
         diverged_episodes,
+        hold_increment_share: hold.mean_increment_share(),
+        hold_reversal_share: hold.reversal_share(),
+        settle_time_s: ErrorStats::of(&settle),
     })
+}
+
+/// What one goal gave, at its end.
+#[derive(Debug, Clone, Copy)]
+pub struct GoalOutcome {
+    /// Tool position error [m] to the goal.
+    pub position_error: f64,
+    /// Tool orientation error [rad] to the goal.
+    pub orientation_error: f64,
+    /// Hold smoothness over the goal's last [`HOLD_WINDOW_S`].
+    pub hold: HoldCounts,
+    /// From the goal's start until the tool stayed near where it ended [s] ([`settle_steps`]).
+    pub settle_time_s: f64,
 }
 
 /// What one evaluation episode gave.
 #[derive(Debug, Default)]
 pub struct EpisodeOutcome {
-    /// Position [m] and orientation [rad] errors at each goal's end.
-    pub ends: Vec<(f64, f64)>,
+    /// Each finished goal, in order.
+    pub goals: Vec<GoalOutcome>,
     /// The policy's action values past the +-[`ACTION_LIMIT`] they are clipped to.
     pub action_values_past_limit: usize,
     /// Every action value the policy gave.
@@ -214,7 +261,11 @@ pub fn run_episode<P>(
 where
     P: FnMut(&[f32; OBSERVATION_DIM]) -> Result<[f32; JOINTS], String>,
 {
+    let control_hz = env.skill().control_hz;
+    let hold_steps = ((HOLD_WINDOW_S * control_hz).round() as usize).max(2);
     let mut outcome = EpisodeOutcome::default();
+    let mut actions: Vec<[f32; JOINTS]> = Vec::new();
+    let mut poses: Vec<(Vector3<f64>, UnitQuaternion<f64>)> = Vec::new();
     for _ in 0..steps {
         let action = policy(&obs).map_err(EvalError::Policy)?;
         outcome.action_values_past_limit += values_past_limit(&action);
@@ -224,10 +275,18 @@ where
             outcome.diverged = true;
             break;
         }
+        let tool = env.tool_pose_b();
+        actions.push(action);
+        poses.push((tool.translation.vector, tool.rotation));
         if out.goal_ended {
-            outcome
-                .ends
-                .push((out.position_error, out.orientation_error));
+            outcome.goals.push(GoalOutcome {
+                position_error: out.position_error,
+                orientation_error: out.orientation_error,
+                hold: HoldCounts::of(&actions[actions.len().saturating_sub(hold_steps)..]),
+                settle_time_s: settle_steps(&poses) as f64 / control_hz,
+            });
+            actions.clear();
+            poses.clear();
         }
         obs = out.observation;
     }
@@ -282,6 +341,9 @@ mod tests {
             orientation_error_rad: ErrorStats::of(&[0.5, 0.5]),
             action_values_past_limit: 0.25,
             diverged_episodes: 0,
+            hold_increment_share: 0.5,
+            hold_reversal_share: 0.125,
+            settle_time_s: ErrorStats::of(&[1.0, 2.0]),
         };
         let v: serde_json::Value = serde_json::to_value(&e).unwrap();
         assert_eq!(v["rollouts"], 2);
@@ -293,6 +355,15 @@ mod tests {
         assert!(e.markdown().contains("| position [m] | 0.2000 | 0.1000 |"));
         assert_eq!(v["action_values_past_limit"], 0.25);
         assert!(e.markdown().contains("clipped to: 25.0 %"));
+        assert_eq!(v["hold_increment_share"], 0.5);
+        assert_eq!(v["hold_reversal_share"], 0.125);
+        assert_eq!(v["settle_time_s"]["mean"], 1.5);
+        assert!(e.markdown().contains(
+            "mean increment 50.0 % of the largest; sign reversals above 20 % of it at 12.5 %"
+        ));
+        assert!(e
+            .markdown()
+            .contains("| settle time [s] (within 2 cm, 0.1 rad of the end) | 1.5000 |"));
         assert!(!e.markdown().contains("blew up"));
         let cut = Evaluation {
             diverged_episodes: 2,

@@ -1,4 +1,4 @@
-//! The arm-reach environment behaves as SPEC section 4 says.
+//! The arm-reach environment behaves as the paper's section IV-A says.
 
 use std::sync::Arc;
 
@@ -248,6 +248,34 @@ fn the_evaluation_counts_action_values_past_the_clip() {
     assert!((share([2.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]) - 1.0 / 7.0).abs() < 1e-12);
 }
 
+#[test]
+fn the_evaluation_measures_how_calmly_a_policy_holds() {
+    use kumi_train::evaluate::evaluate;
+    // A relay (the largest increment, one way then the other) reverses every joint at every
+    // step of the hold window at full increment; a policy that commands nothing holds still,
+    // its tool settled within a second of each goal's start (it only sags at the start).
+    let relay = evaluate(model("arm"), ArmReachConfig::default(), 3, 1, || {
+        let mut k = 0_usize;
+        Ok(move |_: &_| {
+            k += 1;
+            Ok::<_, String>([if k.is_multiple_of(2) { 1.5 } else { -1.5 }; 7])
+        })
+    })
+    .unwrap();
+    assert_eq!(relay.hold_increment_share, 1.0);
+    assert_eq!(relay.hold_reversal_share, 1.0);
+    let still = evaluate(model("arm"), ArmReachConfig::default(), 3, 1, || {
+        Ok(move |_: &_| Ok::<_, String>([0.0; 7]))
+    })
+    .unwrap();
+    assert_eq!(
+        (still.hold_increment_share, still.hold_reversal_share),
+        (0.0, 0.0)
+    );
+    let settle = still.settle_time_s;
+    assert!(settle.p90 <= 1.0 && settle.mean >= 0.0, "{settle:?}");
+}
+
 /// Places the arm's joints a thousand turns past their limits: the limits fling them back, and
 /// the next step blows the physics up.
 fn set_up_a_blow_up(e: &mut ArmReach) {
@@ -302,17 +330,17 @@ fn an_evaluation_episode_stops_where_its_physics_blew_up() {
     let mut e = env(5);
     let obs = e.reset();
     let whole = run_episode(&mut e, obs, 360, &mut policy).unwrap();
-    assert_eq!((whole.ends.len(), whole.diverged), (3, false));
+    assert_eq!((whole.goals.len(), whole.diverged), (3, false));
     assert_eq!(
         (whole.action_values, whole.action_values_past_limit),
         (360 * 7, 360)
     );
     let obs = e.reset();
     let goal = run_episode(&mut e, obs, 120, &mut policy).unwrap();
-    assert_eq!(goal.ends.len(), 1);
+    assert_eq!(goal.goals.len(), 1);
     set_up_a_blow_up(&mut e);
     // The first step blows up: its action is counted, no goal ends, nothing NaN is kept.
     let cut = run_episode(&mut e, obs, 360, &mut policy).unwrap();
     assert!(cut.diverged);
-    assert_eq!((cut.ends.len(), cut.action_values), (0, 7));
+    assert_eq!((cut.goals.len(), cut.action_values), (0, 7));
 }
