@@ -106,41 +106,57 @@ fn docs_cli_md_is_what_the_command_prints() {
     );
 }
 
+/// Appends every file under `dir` whose extension is one of `exts`, leaving out build output
+/// (`target`) and hidden folders.
+fn files_under(dir: &Path, exts: &[&str], out: &mut Vec<PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let path = entry.path();
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        if path.is_dir() && name != "target" && !name.starts_with('.') {
+            files_under(&path, exts, out);
+        } else if path
+            .extension()
+            .is_some_and(|e| exts.iter().any(|x| e == *x))
+        {
+            out.push(path);
+        }
+    }
+}
+
 /// Markdown files a reader is pointed to: the README, `docs/`, the model cards, the reports and
 /// the examples.
 fn markdown_files(with_notebook: bool) -> Vec<PathBuf> {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-        let Ok(entries) = std::fs::read_dir(dir) else {
-            return;
-        };
-        for entry in entries.flatten() {
-            let path = entry.path();
-            if path.is_dir() {
-                walk(&path, out);
-            } else if path.extension().is_some_and(|e| e == "md") {
-                out.push(path);
-            }
-        }
-    }
     let root = root();
     let mut files = vec![root.join("README.md")];
     for dir in ["docs", "policies", "reports", "examples"] {
-        walk(&root.join(dir), &mut files);
+        files_under(&root.join(dir), &["md"], &mut files);
     }
     files.retain(|f| with_notebook || !f.starts_with(root.join("docs/notebook")));
     files.sort();
     files
 }
 
+/// `(line number from 1, line, inside a fenced code block)` for every line of a markdown text
+/// but the fences themselves.
+fn markdown_lines(text: &str) -> impl Iterator<Item = (usize, &str, bool)> {
+    let mut fenced = false;
+    text.lines().enumerate().filter_map(move |(n, line)| {
+        if line.trim_start().starts_with("```") {
+            fenced = !fenced;
+            None
+        } else {
+            Some((n + 1, line, fenced))
+        }
+    })
+}
+
 /// `(target, line)` of every inline markdown link `[text](target)` outside code.
 fn links(text: &str) -> Vec<(String, usize)> {
     let mut out = Vec::new();
-    let mut fenced = false;
-    for (n, line) in text.lines().enumerate() {
-        if line.trim_start().starts_with("```") {
-            fenced = !fenced;
-            continue;
-        }
+    for (n, line, fenced) in markdown_lines(text) {
         if fenced {
             continue;
         }
@@ -149,7 +165,7 @@ fn links(text: &str) -> Vec<(String, usize)> {
         while let Some(at) = rest.find("](") {
             let after = &rest[at + 2..];
             let Some(end) = after.find(')') else { break };
-            out.push((after[..end].trim().to_string(), n + 1));
+            out.push((after[..end].trim().to_string(), n));
             rest = &after[end..];
         }
     }
@@ -168,16 +184,10 @@ fn anchor(heading: &str) -> String {
 }
 
 fn anchors(text: &str) -> BTreeSet<String> {
-    let mut fenced = false;
-    let mut out = BTreeSet::new();
-    for line in text.lines() {
-        if line.trim_start().starts_with("```") {
-            fenced = !fenced;
-        } else if !fenced && line.starts_with('#') {
-            out.insert(anchor(line.trim_start_matches('#')));
-        }
-    }
-    out
+    markdown_lines(text)
+        .filter(|(_, line, fenced)| !fenced && line.starts_with('#'))
+        .map(|(_, line, _)| anchor(line.trim_start_matches('#')))
+        .collect()
 }
 
 #[test]
@@ -222,12 +232,7 @@ fn every_relative_link_in_the_docs_resolves() {
 /// command names.
 fn kumi_invocations(text: &str) -> Vec<(Vec<String>, usize)> {
     let mut out = Vec::new();
-    let mut fenced = false;
-    for (n, line) in text.lines().enumerate() {
-        if line.trim_start().starts_with("```") {
-            fenced = !fenced;
-            continue;
-        }
+    for (n, line, fenced) in markdown_lines(text) {
         let code: Vec<&str> = if fenced {
             vec![line]
         } else {
@@ -249,7 +254,7 @@ fn kumi_invocations(text: &str) -> Vec<(Vec<String>, usize)> {
                     .map(str::to_string)
                     .collect();
                 if !path.is_empty() {
-                    out.push((path, n + 1));
+                    out.push((path, n));
                 }
             }
         }
@@ -308,26 +313,9 @@ fn names_a_stop(text: &str) -> bool {
 fn reference_text_tells_no_history() {
     let root = root();
     let mut files = markdown_files(false);
-    fn walk(dir: &Path, exts: &[&str], out: &mut Vec<PathBuf>) {
-        let Ok(entries) = std::fs::read_dir(dir) else {
-            return;
-        };
-        for entry in entries.flatten() {
-            let path = entry.path();
-            let name = path.file_name().unwrap().to_string_lossy().to_string();
-            if path.is_dir() && name != "target" && !name.starts_with('.') {
-                walk(&path, exts, out);
-            } else if path
-                .extension()
-                .is_some_and(|e| exts.iter().any(|x| e == *x))
-            {
-                out.push(path);
-            }
-        }
-    }
-    walk(&root.join("train/configs"), &["toml"], &mut files);
-    walk(&root.join("urdf"), &["toml", "urdf"], &mut files);
-    walk(&root.join("examples"), &["toml"], &mut files);
+    files_under(&root.join("train/configs"), &["toml"], &mut files);
+    files_under(&root.join("urdf"), &["toml", "urdf"], &mut files);
+    files_under(&root.join("examples"), &["toml"], &mut files);
     for dir in [
         "urdf",
         "sim_bridge",
@@ -339,7 +327,7 @@ fn reference_text_tells_no_history() {
         "tests",
         "scripts",
     ] {
-        walk(&root.join(dir), &["rs", "py", "sh"], &mut files);
+        files_under(&root.join(dir), &["rs", "py", "sh"], &mut files);
     }
     let mut found = Vec::new();
     for file in files {

@@ -27,18 +27,8 @@ pub const SETTLE_ORIENTATION_RAD: f64 = 0.1;
 /// Standing checks measure joint speeds after this long [s], past the start's transient.
 pub const SPEED_AFTER_S: f64 = 1.0;
 
-/// An action value as a share of the largest increment: clipped to +-[`ACTION_LIMIT`], made
-/// absolute, divided by the limit (a non-finite value holds: 0).
-fn increment_share(value: f32) -> f64 {
-    let v = f64::from(value);
-    if v.is_finite() {
-        v.abs().min(ACTION_LIMIT) / ACTION_LIMIT
-    } else {
-        0.0
-    }
-}
-
-/// The signed share of the largest increment (clipped; non-finite holds).
+/// An action value as a signed share of the largest increment: clipped to +-[`ACTION_LIMIT`],
+/// divided by the limit (a non-finite value holds: 0).
 fn signed_share(value: f32) -> f64 {
     let v = f64::from(value);
     if v.is_finite() {
@@ -62,7 +52,7 @@ impl HoldCounts {
     pub fn of(actions: &[[f32; JOINTS]]) -> Self {
         let mut counts = Self::default();
         for action in actions {
-            counts.share_sum += action.iter().map(|a| increment_share(*a)).sum::<f64>();
+            counts.share_sum += action.iter().map(|a| signed_share(*a).abs()).sum::<f64>();
             counts.values += JOINTS;
         }
         for pair in actions.windows(2) {
