@@ -20,6 +20,8 @@ pub enum SimError {
         expected: usize,
         got: usize,
     },
+    #[error("link `{link}`: a load needs finite values and a stiffness >= 0, not {load}")]
+    BadLoad { link: String, load: String },
     #[error("module `{module}`: non-finite command {value}")]
     NonFinite { module: String, value: f64 },
     #[error("module `{module}` has no {what} joints")]

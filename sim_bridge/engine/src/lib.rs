@@ -25,4 +25,6 @@ pub use groups::{contact_groups, mount_is_impulse};
 pub use kumi_model::commands::{apply_increments, clamp_command, CONTROL_HZ};
 pub use kumi_model::Layout;
 pub use servos::{ServoBank, ServoTarget};
-pub use world::{home_joint_positions, Contact, RobotState, SimWorld, Snapshot, GROUND};
+pub use world::{
+    home_joint_positions, Contact, LinkLoad, Load, RobotState, SimWorld, Snapshot, GROUND,
+};

@@ -4,6 +4,7 @@ use std::any::Any;
 use std::ops::Range;
 use std::sync::Arc;
 
+use kumi_model::kinematics::KinematicTree;
 use kumi_model::{ActuatorMode, RobotModel};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
@@ -12,6 +13,79 @@ use crate::engine::Engine;
 use crate::error::SimError;
 use crate::servos::ServoBank;
 use kumi_model::commands::apply_increments;
+
+/// A load on a link ([`SimWorld::set_link_load`]): a constant force plus a spring pulling the
+/// link frame's origin toward an anchor, as the ground holds a leg's tip or a hand holds a tool.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Load {
+    /// The constant part [N], world frame.
+    pub force_w: Vector3<f64>,
+    /// Where the spring pulls [m], world frame.
+    pub anchor_w: Vector3<f64>,
+    /// The spring's stiffness [N/m]; 0 for no spring.
+    pub stiffness_n_m: f64,
+}
+
+impl Load {
+    /// No load.
+    pub const NONE: Self = Self {
+        force_w: Vector3::new(0.0, 0.0, 0.0),
+        anchor_w: Vector3::new(0.0, 0.0, 0.0),
+        stiffness_n_m: 0.0,
+    };
+
+    /// A constant force [N], world frame.
+    pub fn constant(force_w: Vector3<f64>) -> Self {
+        Self {
+            force_w,
+            ..Self::NONE
+        }
+    }
+
+    /// The force [N] on the link when its frame's origin is at `point_w` [m].
+    pub fn force_at(&self, point_w: &Vector3<f64>) -> Vector3<f64> {
+        self.force_w + self.stiffness_n_m * (self.anchor_w - point_w)
+    }
+}
+
+/// A load on one link of a world, as the engines keep it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkLoad {
+    /// The link's index in the kinematic tree.
+    pub link: usize,
+    pub load: Load,
+}
+
+impl LinkLoad {
+    /// The load [`SimWorld::set_link_load`] asks for in a world whose links are `tree`'s:
+    /// `None` for no load, an error for an unknown link, a non-finite value or a negative
+    /// stiffness.
+    pub fn checked(
+        tree: &KinematicTree,
+        link: &str,
+        load: &Load,
+    ) -> Result<Option<Self>, SimError> {
+        let index = tree
+            .link_index(link)
+            .ok_or_else(|| SimError::UnknownLink(link.to_string()))?;
+        let finite = load
+            .force_w
+            .iter()
+            .chain(load.anchor_w.iter())
+            .all(|x| x.is_finite());
+        if !(finite && load.stiffness_n_m.is_finite() && load.stiffness_n_m >= 0.0) {
+            return Err(SimError::BadLoad {
+                link: link.to_string(),
+                load: format!("{load:?}"),
+            });
+        }
+        let none = load.force_w == Vector3::zeros() && load.stiffness_n_m == 0.0;
+        Ok((!none).then_some(Self {
+            link: index,
+            load: *load,
+        }))
+    }
+}
 
 /// A joint configuration and base pose to place the robot at.
 #[derive(Debug, Clone, PartialEq)]
@@ -116,6 +190,12 @@ pub trait SimWorld: Send {
     /// Isaac Lab's `push_by_setting_velocity`, done in place). The robot's servos and the ground
     /// take it from there. Fixed-base robots do not move.
     fn push(&mut self, delta_v_w: &Vector3<f64>, delta_w_w: &Vector3<f64>);
+    /// Puts a load ([`Load`]) on `link`, applied at its frame's origin at every physics step
+    /// from the next one until it is changed: what the rest of a robot or the ground puts on a
+    /// module's tool, for training a skill under load. One link at a time (a new call replaces
+    /// the previous load); [`Load::NONE`] or a reset removes it; snapshots do not carry it. A
+    /// bad load is refused and the load stays as it was.
+    fn set_link_load(&mut self, link: &str, load: &Load) -> Result<(), SimError>;
 
     /// Joint positions [rad], in actuator order.
     fn joint_positions(&self) -> Vec<f64>;

@@ -3,8 +3,8 @@
 use std::sync::Arc;
 
 use kumi_engine::{
-    Contact, Engine, RobotState, ServoBank, ServoState, SimConfig, SimError, SimWorld, Snapshot,
-    GROUND,
+    Contact, Engine, LinkLoad, Load, RobotState, ServoBank, ServoState, SimConfig, SimError,
+    SimWorld, Snapshot, GROUND,
 };
 use kumi_model::kinematics::KinematicTree;
 use kumi_model::RobotModel;
@@ -71,6 +71,8 @@ pub struct MujocoWorld {
     /// MuJoCo reported a blow-up (and reset itself), or a control step ended past
     /// [`kumi_engine::blown_up`]'s bounds, since the last reset.
     diverged: bool,
+    /// The load [`SimWorld::set_link_load`] put on, applied anew at every physics step.
+    link_load: Option<LinkLoad>,
 }
 
 fn rejected(model: &RobotModel, message: String) -> SimError {
@@ -150,6 +152,7 @@ impl MujocoWorld {
             base_link,
             time_s: 0.0,
             diverged: false,
+            link_load: None,
         };
         let home = world.home_state();
         world.reset(&home);
@@ -198,6 +201,7 @@ impl MujocoWorld {
             unsafe { self.data.model_mut() }.dof_damping_mut()[j.dof] =
                 j.joint_damping + command.damping;
         }
+        self.apply_link_load();
         self.data.step();
         // MuJoCo counts bad positions, velocities and accelerations (each after restarting
         // from its initial state).
@@ -206,6 +210,32 @@ impl MujocoWorld {
             .any(|&w| self.data.warning()[w as usize].number > 0)
         {
             self.diverged = true;
+        }
+    }
+
+    /// Puts the load on its link's body for the next physics step: the force at the link
+    /// frame's origin, applied as MuJoCo applies a body's `xfrc_applied`, at its centre of mass
+    /// with its moment about it. A spring reads the link's pose now (MuJoCo's poses after a
+    /// step are those before its integration).
+    fn apply_link_load(&mut self) {
+        if let Some(LinkLoad { link, load }) = self.link_load {
+            if load.stiffness_n_m > 0.0 {
+                self.data.kinematics();
+                self.data.com_pos();
+            }
+            let (body, offset) = self.links[link];
+            let point = (self.body_pose(body) * offset).translation.vector;
+            let com = Vector3::from(self.data.xipos()[body]);
+            let f = load.force_at(&point);
+            let torque = (point - com).cross(&f);
+            self.data.xfrc_applied_mut()[body] = [f.x, f.y, f.z, torque.x, torque.y, torque.z];
+        }
+    }
+
+    /// Takes the load off its body.
+    fn clear_link_load(&mut self) {
+        if let Some(load) = self.link_load.take() {
+            self.data.xfrc_applied_mut()[self.links[load.link].0] = [0.0; 6];
         }
     }
 
@@ -278,6 +308,7 @@ impl SimWorld for MujocoWorld {
             "one joint position per actuator"
         );
         self.data.reset();
+        self.link_load = None;
         if !self.model.fixed_base {
             let t = state.base_pose_w.translation.vector;
             let q = state.base_pose_w.rotation.quaternion();
@@ -354,6 +385,13 @@ impl SimWorld for MujocoWorld {
         for (v, d) in self.data.qvel_mut()[..6].iter_mut().zip(delta) {
             *v += d;
         }
+    }
+
+    fn set_link_load(&mut self, link: &str, load: &Load) -> Result<(), SimError> {
+        let load = LinkLoad::checked(&self.tree, link, load)?;
+        self.clear_link_load();
+        self.link_load = load;
+        Ok(())
     }
 
     fn joint_positions(&self) -> Vec<f64> {

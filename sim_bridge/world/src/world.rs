@@ -3,8 +3,8 @@
 use std::sync::Arc;
 
 use kumi_engine::{
-    Contact, Engine, RobotState, ServoBank, ServoState, SimConfig, SimError, SimWorld, Snapshot,
-    GROUND,
+    Contact, Engine, LinkLoad, Load, RobotState, ServoBank, ServoState, SimConfig, SimError,
+    SimWorld, Snapshot, GROUND,
 };
 use kumi_model::kinematics::KinematicTree;
 use kumi_model::RobotModel;
@@ -81,9 +81,39 @@ pub struct World {
     time_s: f64,
     /// The state passed [`kumi_engine::blown_up`]'s bounds since the last reset.
     diverged: bool,
+    /// The load [`SimWorld::set_link_load`] put on, applied anew at every physics step.
+    link_load: Option<LinkLoad>,
 }
 
 impl World {
+    /// Puts the load on its link's body for the next physics step: the force at the link
+    /// frame's origin as the body stands now, applied at the body's centre of mass with its
+    /// moment about it (rapier keeps user forces and torques, in the world frame, until they
+    /// are reset).
+    fn apply_link_load(&mut self) {
+        if let Some(LinkLoad { link, load }) = self.link_load {
+            let link = &self.links[link];
+            let point = link_pose(&self.physics, link).translation.vector;
+            let force_w = load.force_at(&point);
+            let rb = &mut self.physics.bodies[link.body];
+            let com = to_na_vector(rb.center_of_mass());
+            let torque = (point - com).cross(&force_w);
+            rb.reset_forces(false);
+            rb.reset_torques(false);
+            rb.add_force(to_rapier_vector(&force_w), true);
+            rb.add_torque(to_rapier_vector(&torque), true);
+        }
+    }
+
+    /// Takes the load off its body.
+    fn clear_link_load(&mut self) {
+        if let Some(load) = self.link_load.take() {
+            let rb = &mut self.physics.bodies[self.links[load.link].body];
+            rb.reset_forces(false);
+            rb.reset_torques(false);
+        }
+    }
+
     /// Builds the world and places the robot at its home configuration, standing on the ground
     /// at the origin (fixed-base robots: base at the origin).
     pub fn new(model: Arc<RobotModel>, config: SimConfig) -> Result<Self, SimError> {
@@ -125,6 +155,7 @@ impl World {
             pristine,
             time_s: 0.0,
             diverged: false,
+            link_load: None,
         };
         let home = world.home_state();
         world.reset(&home);
@@ -208,6 +239,7 @@ impl SimWorld for World {
             "one joint position per actuator"
         );
         self.restore_owned(self.pristine.clone());
+        self.link_load = None;
         let base = if self.model.fixed_base {
             Isometry3::identity()
         } else {
@@ -295,6 +327,7 @@ impl SimWorld for World {
                     a.damping as f32,
                 );
             }
+            self.apply_link_load();
             self.physics.step();
         }
         self.time_s += 1.0 / self.config.control_hz;
@@ -341,6 +374,13 @@ impl SimWorld for World {
                 rb.set_angvel(w, true);
             }
         }
+    }
+
+    fn set_link_load(&mut self, link: &str, load: &Load) -> Result<(), SimError> {
+        let load = LinkLoad::checked(&self.tree, link, load)?;
+        self.clear_link_load();
+        self.link_load = load;
+        Ok(())
     }
 
     /// Joint positions [rad], in actuator order.
