@@ -192,8 +192,13 @@ impl SkillDriver {
 
     /// Observes the module, runs the skill and applies its increments (the arm node's rule).
     fn act(&mut self, world: &mut dyn SimWorld) -> Result<()> {
-        let (q, qd) = (world.joint_positions(), world.joint_velocities());
-        let observation = observation::build(&self.at(&q), &self.at(&qd), &self.goal);
+        let (q, qd, targets) = (
+            world.joint_positions(),
+            world.joint_velocities(),
+            world.commands(),
+        );
+        let observation =
+            observation::build(&self.at(&q), &self.at(&qd), &self.at(&targets), &self.goal);
         let action = self.policy.act(&observation)?;
         world.apply_increments(&self.module, &self.skill.increments(&action))?;
         Ok(())
@@ -265,6 +270,12 @@ struct SimReport {
     /// (`kumi_policies::settle::SpeedTally`; NaN for a run no longer than a second).
     arm_joint_speed_after_1s_mean_rad_s: f64,
     arm_joint_speed_after_1s_max_rad_s: f64,
+    /// How far the arm joints' position targets lead their angles after the first second:
+    /// mean and largest absolute value [rad]. A servo reaches its effort limit a few mrad
+    /// from its target at rest, so a larger lead at rest is a command wound up against a load
+    /// it cannot move.
+    arm_target_lead_after_1s_mean_rad: f64,
+    arm_target_lead_after_1s_max_rad: f64,
     finite: bool,
     ground_contacts_at_end: Vec<String>,
     /// Wheel modules with no wheel on the ground, mean over the control steps (0 without
@@ -329,6 +340,7 @@ pub fn run(args: SimArgs) -> Result<()> {
     let speed_after_step =
         (kumi_policies::settle::SPEED_AFTER_S * config.control_hz).round() as u64;
     let mut arm_speeds = kumi_policies::settle::SpeedTally::default();
+    let mut arm_leads = kumi_policies::settle::SpeedTally::default();
     let wall = Instant::now();
     for step in 0..steps {
         for driver in drivers.iter_mut() {
@@ -351,12 +363,16 @@ pub fn run(args: SimArgs) -> Result<()> {
                 .all(|x| x.is_finite());
         max_speed = v.iter().fold(max_speed, |a, x| a.max(x.abs()));
         if step >= speed_after_step {
-            arm_speeds.add(
-                v.iter()
+            let arm = |values: Vec<f64>| {
+                values
+                    .into_iter()
                     .zip(&arm_joint)
                     .filter(|(_, arm)| **arm)
-                    .map(|(x, _)| *x),
-            );
+                    .map(|(x, _)| x)
+            };
+            arm_speeds.add(arm(v.clone()));
+            let q = world.joint_positions();
+            arm_leads.add(arm(world.commands()).zip(arm(q)).map(|(t, q)| t - q));
         }
         let off = world.wheel_modules_off_ground();
         off_ground += off;
@@ -364,7 +380,7 @@ pub fn run(args: SimArgs) -> Result<()> {
     }
     let wall_s = wall.elapsed().as_secs_f64();
     let end = world.base_pose().translation.vector;
-    let arm_speeds = arm_speeds.stats();
+    let (arm_speeds, arm_leads) = (arm_speeds.stats(), arm_leads.stats());
     let report = SimReport {
         morphology: model.name.clone(),
         engine: engine.to_string(),
@@ -386,6 +402,8 @@ pub fn run(args: SimArgs) -> Result<()> {
         max_joint_speed_rad_s: max_speed,
         arm_joint_speed_after_1s_mean_rad_s: arm_speeds.mean,
         arm_joint_speed_after_1s_max_rad_s: arm_speeds.max,
+        arm_target_lead_after_1s_mean_rad: arm_leads.mean,
+        arm_target_lead_after_1s_max_rad: arm_leads.max,
         finite,
         ground_contacts_at_end: world.ground_contacts(),
         wheel_modules_off_ground_mean: off_ground as f64 / steps.max(1) as f64,
@@ -438,6 +456,10 @@ pub fn run(args: SimArgs) -> Result<()> {
         println!(
             "  arm joints after 1 s {:.3} rad/s mean, {:.3} rad/s max",
             arm_speeds.mean, arm_speeds.max
+        );
+        println!(
+            "  targets' lead after 1 s {:.4} rad mean, {:.4} rad max",
+            arm_leads.mean, arm_leads.max
         );
         println!("  all values finite   {}", finite);
         println!(

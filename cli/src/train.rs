@@ -9,7 +9,7 @@ use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use kumi_terms::action::{GoalBounds, JointBounds};
 use kumi_terms::ObservationOptions;
-use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig};
+use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig, SkillObservation, ToolLoad};
 use kumi_train::body_reward::{BodyWeights, PenaltyWeights};
 use kumi_train::env::Environment;
 use kumi_train::noise::ObservationNoise;
@@ -28,6 +28,24 @@ pub struct TrainArmConfig {
     pub ppo: PpoConfig,
     pub reward: ReachWeights,
     pub goals: GoalConfig,
+    /// A load on the tool during some goals; none when absent. (Left out of the config's
+    /// fingerprint when absent, as `[observation]`, so a config without them keeps its
+    /// fingerprint and reproduces its skill bit for bit.)
+    #[serde(default, skip_serializing_if = "ToolLoad::is_none")]
+    pub load: ToolLoad,
+    /// What the skill observes; Table I's 21 values when absent.
+    #[serde(default, skip_serializing_if = "SkillObservation::is_table_i")]
+    pub observation: SkillObservation,
+}
+
+impl TrainArmConfig {
+    /// The fingerprint a skill trained on this config carries (`kumi.config_hash`): of the
+    /// values, not the text, so that comments and layout do not change what was trained.
+    pub fn fingerprint(&self) -> Result<String> {
+        Ok(kumi_policies::metadata::fingerprint(
+            &serde_json::to_string(self)?,
+        ))
+    }
 }
 
 /// The config at `path`, or the shipped one.
@@ -607,6 +625,8 @@ fn train_arm(args: TrainArmArgs) -> Result<()> {
         ppo: config.clone(),
         reward: file.reward,
         goals: file.goals.clone(),
+        load: file.load,
+        observation: file.observation,
     };
     let model = load_model("arm")?;
     let engine = training_engine(&args.run)?;
@@ -618,6 +638,8 @@ fn train_arm(args: TrainArmArgs) -> Result<()> {
                     engine,
                     weights: file.reward,
                     goals: goals.clone(),
+                    load: file.load,
+                    observe_targets: file.observation.targets_lead,
                     ..ArmReachConfig::default()
                 },
                 config.seed.wrapping_mul(1000).wrapping_add(i as u64),
@@ -630,8 +652,8 @@ fn train_arm(args: TrainArmArgs) -> Result<()> {
         kumi_worlds::SimConfig::for_model(&model).control_hz,
     )?
     .metadata(
-        // Of the values, not the text: comments and layout do not change what was trained.
-        &kumi_policies::metadata::fingerprint(&serde_json::to_string(&trained)?),
+        envs[0].config().observation_dim(),
+        &trained.fingerprint()?,
         0,
     );
     metadata.remove(kumi_policies::metadata::ENV_STEPS);
@@ -733,6 +755,30 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn the_shipped_skill_config_keeps_the_shipped_skills_fingerprint() {
+        // Keys added since (a load, the targets' lead, the lead penalty) are left out of the
+        // fingerprint when absent: `kumi train arm` still reproduces the shipped file.
+        let model = crate::sim::load_model("arm").unwrap();
+        let skill = kumi_policies::skill::ArmSkill::new(&model.modules[0], 30.0).unwrap();
+        let shipped = kumi_runtime::SkillPolicy::load(
+            &kumi_runtime::shipped_arm_policy(),
+            &skill,
+            kumi_runtime::BackendChoice::Tract,
+        )
+        .unwrap();
+        let config = read_config(None).unwrap();
+        assert_eq!(
+            config.fingerprint().unwrap(),
+            shipped.metadata()[kumi_policies::metadata::CONFIG_HASH]
+        );
+        assert_eq!(
+            shipped.observation_dim(),
+            kumi_policies::observation::BASE_DIM
+        );
+    }
+
     use super::*;
 
     #[test]

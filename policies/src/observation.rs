@@ -1,5 +1,12 @@
-//! The low-level policy's observation (Table I): joint angles, joint velocities, goal position
-//! and goal orientation, the goal in the arm's base frame.
+//! The low-level policy's observation: Table I's joint angles, joint velocities, goal position
+//! and goal orientation (the goal in the arm's base frame), then how far each joint's position
+//! target leads its angle.
+//!
+//! The skill moves the servo targets by increments; the joints follow with a lag, and under
+//! load they sag below their targets. Without the lead a policy at its goal cannot tell
+//! whether its targets are ahead of the joints or behind them, so it cannot command "stay".
+//! A skill exported with the first 21 values only ([`BASE_DIM`], format
+//! `kumi-skill/arm-reach/1`) reads the leading 21 values of the same layout.
 
 use nalgebra::{UnitQuaternion, Vector3};
 
@@ -8,7 +15,10 @@ use crate::rotation::canonical;
 /// Joints of an arm module.
 pub const JOINTS: usize = 7;
 /// Length of the observation.
-pub const OBSERVATION_DIM: usize = 21;
+pub const OBSERVATION_DIM: usize = 28;
+/// Length of Table I's part (joints, velocities, goal): what a skill of format
+/// `kumi-skill/arm-reach/1` reads.
+pub const BASE_DIM: usize = 21;
 
 /// Name of each observation entry, in order (written into the exported policy's metadata).
 pub const OBSERVATION_NAMES: [&str; OBSERVATION_DIM] = [
@@ -17,6 +27,8 @@ pub const OBSERVATION_NAMES: [&str; OBSERVATION_DIM] = [
     "goal_x", "goal_y", "goal_z", // goal position in the arm base frame [m]
     "goal_qw", "goal_qx", "goal_qy",
     "goal_qz", // goal orientation in the arm base frame, w >= 0
+    "lead1", "lead2", "lead3", "lead4", "lead5", "lead6",
+    "lead7", // position target less joint angle [rad]
 ];
 
 /// A reaching goal for the tool frame, in the arm base frame (`_b`).
@@ -28,14 +40,21 @@ pub struct Goal {
     pub orientation_b: UnitQuaternion<f64>,
 }
 
-/// Builds the observation: `q` [rad] and `qd` [rad/s] in the module's joint order, and the goal
-/// in the arm base frame. The goal quaternion is written with a non-negative scalar part.
-/// Values are rounded to f32 here, once, for both training and deployment.
-pub fn build(q: &[f64; JOINTS], qd: &[f64; JOINTS], goal: &Goal) -> [f32; OBSERVATION_DIM] {
+/// Builds the observation: `q` [rad] and `qd` [rad/s] in the module's joint order, the goal in
+/// the arm base frame, and the joints' position targets [rad] (what the servos are commanded
+/// to, which the skill's increments move). The goal quaternion is written with a non-negative
+/// scalar part. Values are rounded to f32 here, once, for both training and deployment.
+pub fn build(
+    q: &[f64; JOINTS],
+    qd: &[f64; JOINTS],
+    targets: &[f64; JOINTS],
+    goal: &Goal,
+) -> [f32; OBSERVATION_DIM] {
     let mut obs = [0.0_f32; OBSERVATION_DIM];
     for i in 0..JOINTS {
         obs[i] = q[i] as f32;
         obs[JOINTS + i] = qd[i] as f32;
+        obs[BASE_DIM + i] = (targets[i] - q[i]) as f32;
     }
     let p = goal.position_b;
     obs[14] = p.x as f32;
@@ -54,7 +73,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn layout_is_joints_velocities_position_quaternion() {
+    fn layout_is_joints_velocities_position_quaternion_lead() {
         let q = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7];
         let qd = [-1.0, -2.0, -3.0, -4.0, -5.0, -6.0, -7.0];
         // A goal whose quaternion comes in with w < 0: the observation flips it.
@@ -63,7 +82,8 @@ mod tests {
             position_b: Vector3::new(0.25, -0.125, 1.0),
             orientation_b: UnitQuaternion::new_unchecked(-r.into_inner()),
         };
-        let obs = build(&q, &qd, &goal);
+        let targets = [0.1, 0.25, 0.3, 0.4, 0.5, 0.6, 0.5];
+        let obs = build(&q, &qd, &targets, &goal);
         assert_eq!(&obs[..7], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7]);
         assert_eq!(&obs[7..14], &[-1.0, -2.0, -3.0, -4.0, -5.0, -6.0, -7.0]);
         assert_eq!(&obs[14..17], &[0.25, -0.125, 1.0]);
@@ -72,5 +92,9 @@ mod tests {
         assert_eq!(&obs[18..20], &[0.0, 0.0]);
         assert_eq!(obs[20], 0.25_f64.sin() as f32);
         assert_eq!(OBSERVATION_NAMES[14], "goal_x");
+        let lead: Vec<f32> = (0..JOINTS).map(|i| (targets[i] - q[i]) as f32).collect();
+        assert_eq!(&obs[BASE_DIM..], lead.as_slice());
+        assert_eq!(obs[BASE_DIM], 0.0);
+        assert_eq!(OBSERVATION_NAMES[BASE_DIM], "lead1");
     }
 }

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use kumi_model::ModuleInstance;
 
 use crate::metadata;
-use crate::observation::{JOINTS, OBSERVATION_DIM, OBSERVATION_NAMES};
+use crate::observation::{BASE_DIM, JOINTS, OBSERVATION_DIM, OBSERVATION_NAMES};
 
 /// The bound [policy units] the skill's action values are clipped to before they are scaled
 /// to joint increments ([`ArmSkill::increments`]).
@@ -124,10 +124,17 @@ impl ArmSkill {
         out
     }
 
-    /// The metadata an exported policy of this skill carries. `config_hash` identifies the
-    /// training config, `env_steps` how long it trained.
-    pub fn metadata(&self, config_hash: &str, env_steps: u64) -> BTreeMap<String, String> {
-        let mut m = self.contract();
+    /// The metadata an exported policy of this skill carries, reading the leading
+    /// `observation_dim` observation values ([`OBSERVATION_DIM`], or [`BASE_DIM`] for Table I's
+    /// observation, format `kumi-skill/arm-reach/1`). `config_hash` identifies the training
+    /// config, `env_steps` how long it trained.
+    pub fn metadata(
+        &self,
+        observation_dim: usize,
+        config_hash: &str,
+        env_steps: u64,
+    ) -> BTreeMap<String, String> {
+        let mut m = self.contract(observation_dim);
         m.insert(metadata::CONFIG_HASH.into(), config_hash.into());
         m.insert(metadata::ENV_STEPS.into(), env_steps.to_string());
         m.insert(
@@ -137,12 +144,21 @@ impl ArmSkill {
         m
     }
 
-    /// The entries a policy must match to drive this module.
-    fn contract(&self) -> BTreeMap<String, String> {
+    /// The entries a policy reading the leading `observation_dim` observation values must
+    /// match to drive this module.
+    fn contract(&self, observation_dim: usize) -> BTreeMap<String, String> {
+        let format = if observation_dim == BASE_DIM {
+            metadata::ARM_REACH_FORMAT_BASE
+        } else {
+            metadata::ARM_REACH_FORMAT
+        };
         [
-            (metadata::FORMAT, metadata::ARM_REACH_FORMAT.to_string()),
-            (metadata::OBSERVATION, OBSERVATION_NAMES.join(",")),
-            (metadata::OBSERVATION_DIM_KEY, OBSERVATION_DIM.to_string()),
+            (metadata::FORMAT, format.to_string()),
+            (
+                metadata::OBSERVATION,
+                OBSERVATION_NAMES[..observation_dim].join(","),
+            ),
+            (metadata::OBSERVATION_DIM_KEY, observation_dim.to_string()),
             (metadata::ACTION_DIM_KEY, JOINTS.to_string()),
             (metadata::JOINT_NAMES, self.joints.join(",")),
             (metadata::ACTION_SCALE, join(&self.increment_scale)),
@@ -155,11 +171,17 @@ impl ArmSkill {
     }
 
     /// Checks a policy's metadata against this module: format, observation layout, sizes,
-    /// joint names and order, action scale and clip, and control rate must all agree.
-    pub fn check(&self, found: &BTreeMap<String, String>) -> Result<(), MetadataMismatch> {
+    /// joint names and order, action scale and clip, and control rate must all agree. Returns
+    /// how many leading observation values the policy reads: [`OBSERVATION_DIM`], or
+    /// [`BASE_DIM`] for a skill of format `kumi-skill/arm-reach/1`.
+    pub fn check(&self, found: &BTreeMap<String, String>) -> Result<usize, MetadataMismatch> {
         // Keys are checked in a fixed order so that the first error names the root cause
         // (a foreign file fails on its format, not on some later key).
-        let contract = self.contract();
+        let observation_dim = match found.get(metadata::FORMAT).map(String::as_str) {
+            Some(metadata::ARM_REACH_FORMAT_BASE) => BASE_DIM,
+            _ => OBSERVATION_DIM,
+        };
+        let contract = self.contract(observation_dim);
         for key in metadata::CONTRACT_KEYS {
             let expected = &contract[key];
             match found.get(key) {
@@ -175,7 +197,7 @@ impl ArmSkill {
                 Some(_) => {}
             }
         }
-        Ok(())
+        Ok(observation_dim)
     }
 }
 
@@ -237,19 +259,39 @@ mod tests {
     #[test]
     fn a_policy_for_this_module_passes_its_own_check() {
         let skill = ArmSkill::new(&arm(1.5), 30.0).unwrap();
-        let m = skill.metadata("abc", 10);
+        let m = skill.metadata(OBSERVATION_DIM, "abc", 10);
         assert_eq!(
             m[metadata::ACTION_SCALE],
             "0.05,0.05,0.05,0.05,0.05,0.05,0.05"
         );
-        assert_eq!(m[metadata::OBSERVATION_DIM_KEY], "21");
-        assert_eq!(skill.check(&m), Ok(()));
+        assert_eq!(m[metadata::OBSERVATION_DIM_KEY], "28");
+        assert_eq!(skill.check(&m), Ok(OBSERVATION_DIM));
+    }
+
+    #[test]
+    fn a_skill_of_the_first_format_reads_the_leading_21_values() {
+        let skill = ArmSkill::new(&arm(1.5), 30.0).unwrap();
+        let mut m = skill.metadata(OBSERVATION_DIM, "abc", 10);
+        m.insert(
+            metadata::FORMAT.into(),
+            metadata::ARM_REACH_FORMAT_BASE.into(),
+        );
+        m.insert(metadata::OBSERVATION_DIM_KEY.into(), "21".into());
+        m.insert(
+            metadata::OBSERVATION.into(),
+            OBSERVATION_NAMES[..BASE_DIM].join(","),
+        );
+        assert_eq!(skill.check(&m), Ok(BASE_DIM));
+        // The first format with the lead's names is not that layout.
+        m.insert(metadata::OBSERVATION_DIM_KEY.into(), "28".into());
+        let err = skill.check(&m).unwrap_err().to_string();
+        assert!(err.contains("kumi.observation_dim"), "{err}");
     }
 
     #[test]
     fn mismatches_name_the_key_and_both_values() {
         let skill = ArmSkill::new(&arm(1.5), 30.0).unwrap();
-        let trained = skill.metadata("abc", 10);
+        let trained = skill.metadata(OBSERVATION_DIM, "abc", 10);
         // Another control rate changes the scale and the rate: the scale is reported first.
         let other = ArmSkill::new(&arm(1.5), 60.0).unwrap();
         let err = other.check(&trained).unwrap_err().to_string();

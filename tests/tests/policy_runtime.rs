@@ -44,10 +44,39 @@ fn use_onnxruntime() {
 }
 
 #[test]
+fn a_skill_of_the_first_format_reads_the_leading_21_values() {
+    use kumi_policies::observation::BASE_DIM;
+    use_onnxruntime();
+    let skill = arm_skill(30.0);
+    let (net, norm, bytes) = random_policy(BASE_DIM, &skill.metadata(BASE_DIM, "test", 0));
+    let mut rng = ChaCha8Rng::seed_from_u64(10);
+    for choice in [BackendChoice::Tract, BackendChoice::OnnxRuntime] {
+        let mut policy =
+            SkillPolicy::from_bytes(bytes.clone(), "table1.onnx", &skill, choice).unwrap();
+        assert_eq!(policy.observation_dim(), BASE_DIM);
+        let observations: Vec<[f32; OBSERVATION_DIM]> = (0..5)
+            .map(|_| std::array::from_fn(|_| rng.random_range(-3.0..3.0)))
+            .collect();
+        let batch = policy.act_batch(&observations).unwrap();
+        for (obs, batched) in observations.iter().zip(&batch) {
+            let got = policy.act(obs).unwrap();
+            let want = net.forward(&norm.apply(&obs[..BASE_DIM]), 1);
+            for ((g, b), w) in got.iter().zip(batched).zip(&want) {
+                assert!(
+                    (g - w).abs() <= 1e-5 && (g - b).abs() <= 1e-6,
+                    "{choice:?}: {g}, batched {b} vs {w}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
 fn both_backends_reproduce_the_training_network() {
     use_onnxruntime();
     let skill = arm_skill(30.0);
-    let (net, norm, bytes) = random_policy(OBSERVATION_DIM, &skill.metadata("test", 0));
+    let (net, norm, bytes) =
+        random_policy(OBSERVATION_DIM, &skill.metadata(OBSERVATION_DIM, "test", 0));
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     for choice in [BackendChoice::Tract, BackendChoice::OnnxRuntime] {
         let mut policy =
@@ -75,7 +104,7 @@ fn both_backends_reproduce_the_training_network() {
 
 #[test]
 fn a_policy_for_another_control_rate_is_refused() {
-    let trained = arm_skill(60.0).metadata("test", 0);
+    let trained = arm_skill(60.0).metadata(OBSERVATION_DIM, "test", 0);
     let (_, _, bytes) = random_policy(OBSERVATION_DIM, &trained);
     let err = SkillPolicy::from_bytes(bytes, "fast.onnx", &arm_skill(30.0), BackendChoice::Tract)
         .unwrap_err();
@@ -91,7 +120,7 @@ fn a_policy_for_another_control_rate_is_refused() {
 #[test]
 fn a_policy_for_other_joints_is_refused() {
     let skill = arm_skill(30.0);
-    let mut m = skill.metadata("test", 0);
+    let mut m = skill.metadata(OBSERVATION_DIM, "test", 0);
     m.insert(metadata::JOINT_NAMES.into(), "j7,j6,j5,j4,j3,j2,j1".into());
     let (_, _, bytes) = random_policy(OBSERVATION_DIM, &m);
     let text = SkillPolicy::from_bytes(bytes, "p.onnx", &skill, BackendChoice::Tract)
@@ -121,12 +150,12 @@ fn a_model_without_kumi_metadata_is_refused() {
 fn a_model_of_the_wrong_shape_is_refused() {
     // Metadata that claims the arm layout on a network with 20 inputs.
     let skill = arm_skill(30.0);
-    let (_, _, bytes) = random_policy(20, &skill.metadata("test", 0));
+    let (_, _, bytes) = random_policy(20, &skill.metadata(OBSERVATION_DIM, "test", 0));
     let err = SkillPolicy::from_bytes(bytes, "p.onnx", &skill, BackendChoice::Tract).unwrap_err();
     let text = err.to_string();
     assert!(matches!(err, RuntimeError::Shape { .. }), "{text}");
     assert!(
-        text.contains("the input has shape [batch, 20]") && text.contains("[batch, 21]"),
+        text.contains("the input has shape [batch, 20]") && text.contains("[batch, 28]"),
         "{text}"
     );
 }

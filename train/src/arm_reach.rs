@@ -11,8 +11,8 @@ use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::rotation::orientation_error;
 use kumi_policies::skill::{ArmSkill, SkillError};
-use kumi_worlds::{apply_increments, Engine, RobotState, SimConfig, SimError, SimWorld};
-use nalgebra::Isometry3;
+use kumi_worlds::{apply_increments, Engine, Load, RobotState, SimConfig, SimError, SimWorld};
+use nalgebra::{Isometry3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -32,6 +32,140 @@ pub struct ArmReachConfig {
     pub goals: GoalDistribution,
     pub goal_noise: GoalNoise,
     pub weights: ReachWeights,
+    /// A force on the tool during some goals (none by default: the paper's task).
+    pub load: ToolLoad,
+    /// The policy observes how far its targets lead the joints (all [`OBSERVATION_DIM`]
+    /// values, format `kumi-skill/arm-reach/2`); otherwise Table I's leading
+    /// [`observation::BASE_DIM`] (format 1, the shipped skill's).
+    pub observe_targets: bool,
+}
+
+impl ArmReachConfig {
+    /// How many leading values of the observation the policy is trained on.
+    pub fn observation_dim(&self) -> usize {
+        if self.observe_targets {
+            OBSERVATION_DIM
+        } else {
+            observation::BASE_DIM
+        }
+    }
+}
+
+/// What the skill observes (`[observation]` of the training config).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SkillObservation {
+    /// How far each joint's position target leads its angle, after Table I's values (format
+    /// `kumi-skill/arm-reach/2`); without it, Table I's 21 values (format 1).
+    pub targets_lead: bool,
+}
+
+impl SkillObservation {
+    /// Table I's observation (the section left out).
+    pub fn is_table_i(&self) -> bool {
+        !self.targets_lead
+    }
+}
+
+/// A load on the tool during some goals (`[load]` of the training config): what the rest of a
+/// robot puts on an arm module that carries it (a leg under the base, an arm holding a wheel
+/// module), which a fixed arm reaching in free space never feels. A goal may come with a
+/// constant force, with a spring holding the tool where it stands when the goal starts (as the
+/// ground holds a leg's tip: the skill cannot reach its goal and must not wind its targets up
+/// trying), or with both.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToolLoad {
+    /// Probability that a goal comes with a constant force.
+    pub share: f64,
+    /// Largest force [N]: the magnitude is uniform in [0, max_force_n], the direction uniform.
+    pub max_force_n: f64,
+    /// Probability that a goal comes with the tool held where it stands; 0 when absent.
+    #[serde(default)]
+    pub anchored_share: f64,
+    /// The holding spring's stiffness range [N/m], drawn uniformly.
+    #[serde(default)]
+    pub stiffness_n_m: [f64; 2],
+    /// When set, an anchored goal is the tool's pose where it is held, moved by up to this much
+    /// [m] in a random direction (a module asked to hold about where it stands); when absent, an
+    /// anchored goal is drawn as any other, mostly out of the held tool's reach.
+    #[serde(default)]
+    pub anchored_goal_offset_m: Option<f64>,
+}
+
+impl ToolLoad {
+    /// Whether no goal is ever loaded (the section left out).
+    pub fn is_none(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Refuses shares outside [0, 1], a negative or non-finite force, or a stiffness range
+    /// that is not 0 <= low <= high (finite) while anchored goals are asked for.
+    pub fn validate(&self) -> Result<(), EnvError> {
+        let share = |p: f64| (0.0..=1.0).contains(&p);
+        let [low, high] = self.stiffness_n_m;
+        let offset = self.anchored_goal_offset_m.unwrap_or(0.0);
+        let stiffness = self.anchored_share == 0.0
+            || (low.is_finite()
+                && high.is_finite()
+                && 0.0 <= low
+                && low <= high
+                && offset.is_finite()
+                && offset >= 0.0);
+        if !(share(self.share)
+            && share(self.anchored_share)
+            && self.max_force_n.is_finite()
+            && self.max_force_n >= 0.0
+            && stiffness)
+        {
+            return Err(EnvError::Settings(format!(
+                "[load]: share and anchored_share must lie in [0, 1], max_force_n be a force >= 0 N, stiffness_n_m a range [low, high] with 0 <= low <= high N/m and anchored_goal_offset_m >= 0 m; got {self:?}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// The load for the next goal, the tool's frame at `tool_w` [m] (world frame). Draws
+    /// nothing for a kind of load no goal gets, so a config without loads keeps its random
+    /// stream.
+    pub fn draw(&self, rng: &mut impl Rng, tool_w: &Vector3<f64>) -> Load {
+        // (An anchored load is the one with a spring: `Load::stiffness_n_m` > 0.)
+        let mut load = Load::NONE;
+        if self.share > 0.0 && rng.random_bool(self.share) {
+            load.force_w = uniform_direction(rng) * rng.random_range(0.0..=self.max_force_n);
+        }
+        if self.anchored_share > 0.0 && rng.random_bool(self.anchored_share) {
+            let [low, high] = self.stiffness_n_m;
+            load.anchor_w = *tool_w;
+            load.stiffness_n_m = rng.random_range(low..=high).max(f64::MIN_POSITIVE);
+        }
+        load
+    }
+
+    /// The goal of an anchored goal period near the tool's pose `tool_b`, when
+    /// `anchored_goal_offset_m` is set: that pose moved by up to the offset in a random
+    /// direction.
+    pub fn anchored_goal(&self, rng: &mut impl Rng, tool_b: &Isometry3<f64>) -> Option<Goal> {
+        let radius = self.anchored_goal_offset_m?;
+        let offset = uniform_direction(rng) * rng.random_range(0.0..=radius);
+        Some(Goal {
+            position_b: tool_b.translation.vector + offset,
+            orientation_b: tool_b.rotation,
+        })
+    }
+}
+
+/// A direction drawn uniformly on the unit sphere (a normal draw per axis, normalised).
+fn uniform_direction(rng: &mut impl Rng) -> Vector3<f64> {
+    loop {
+        let v = Vector3::from_fn(|_, _| {
+            let (u1, u2): (f64, f64) = (rng.random_range(f64::EPSILON..1.0), rng.random());
+            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        });
+        if v.norm() > 1e-9 {
+            return v.normalize();
+        }
+    }
 }
 
 impl Default for ArmReachConfig {
@@ -47,6 +181,8 @@ impl Default for ArmReachConfig {
                 orientation_std: 0.01,
             },
             weights: ReachWeights::default(),
+            load: ToolLoad::default(),
+            observe_targets: false,
         }
     }
 }
@@ -191,6 +327,7 @@ impl ArmReach {
         config: ArmReachConfig,
         seed: u64,
     ) -> Result<Self, EnvError> {
+        config.load.validate()?;
         let not_arm = || EnvError::NotASingleArm(model.name.clone());
         if !model.fixed_base || model.modules.len() != 1 {
             return Err(not_arm());
@@ -256,9 +393,14 @@ impl ArmReach {
         };
         self.world.reset(&RobotState {
             base_pose_w: Isometry3::identity(),
-            joint_positions: q.clone(),
+            joint_positions: q,
         });
-        self.targets = q;
+        // The targets start at the measured angles, as the arm node's do (rapier's f32 state
+        // can differ from the drawn angles in the last bits).
+        self.targets = self.world.joint_positions();
+        self.world
+            .set_position_targets(&self.module, &self.targets)
+            .expect("measured angles are finite and within the joint ranges");
         self.previous_action = [0.0; JOINTS];
         self.step = 0;
         self.goal = match start {
@@ -272,8 +414,30 @@ impl ArmReach {
             }
             None => self.sample_goal(),
         };
+        self.load_tool();
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
         self.observation()
+    }
+
+    /// Draws the tool's load for the goal that starts now and puts it on; an anchored goal
+    /// period may get its goal where the tool is held ([`ToolLoad::anchored_goal`]).
+    fn load_tool(&mut self) {
+        let tool_w = self
+            .world
+            .link_pose(&self.ee_link)
+            .expect("the tool link exists")
+            .translation
+            .vector;
+        let load = self.config.load.draw(&mut self.rng, &tool_w);
+        self.world
+            .set_link_load(&self.ee_link, &load)
+            .expect("the tool link exists and the load is valid");
+        if load.stiffness_n_m > 0.0 {
+            let tool_b = self.tool_pose_b();
+            if let Some(goal) = self.config.load.anchored_goal(&mut self.rng, &tool_b) {
+                self.goal = goal;
+            }
+        }
     }
 
     fn sample_goal(&mut self) -> Goal {
@@ -316,12 +480,22 @@ impl ArmReach {
     /// The observation the policy sees now (with the noisy goal).
     pub fn observation(&self) -> [f32; OBSERVATION_DIM] {
         let (q, qd) = self.joints();
-        observation::build(&q, &qd, &self.observed_goal)
+        observation::build(&q, &qd, &self.targets(), &self.observed_goal)
+    }
+
+    /// The joints' position targets [rad], which the skill's increments move.
+    pub fn targets(&self) -> [f64; JOINTS] {
+        std::array::from_fn(|j| self.targets[j])
     }
 
     /// The skill's contract with this arm (joint order, limits, action scale, control rate).
     pub fn skill(&self) -> &ArmSkill {
         &self.skill
+    }
+
+    /// The task's settings.
+    pub fn config(&self) -> &ArmReachConfig {
+        &self.config
     }
 
     /// The simulated world (read-only), e.g. to rebuild an observation from its state.
@@ -359,12 +533,15 @@ impl ArmReach {
 
         let (position_error, orientation_error) = self.errors();
         let (q, qd) = self.joints();
+        let targets = self.targets();
+        let lead: [f64; JOINTS] = std::array::from_fn(|j| targets[j] - q[j]);
         let terms = reach_terms(
             position_error,
             orientation_error,
             act,
             &self.previous_action,
             &qd,
+            &lead,
             &self.config.weights,
         );
         self.previous_action = *act;
@@ -372,10 +549,11 @@ impl ArmReach {
         let goal_ended = self.step.is_multiple_of(self.config.goal_period_steps);
         if goal_ended {
             self.goal = self.sample_goal();
+            self.load_tool();
         }
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
         StepOutcome {
-            observation: observation::build(&q, &qd, &self.observed_goal),
+            observation: observation::build(&q, &qd, &targets, &self.observed_goal),
             reward: terms.total(),
             terms,
             truncated: self.step >= self.config.episode_steps,

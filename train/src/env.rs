@@ -53,9 +53,11 @@ pub const BODY_REPLAY_METRICS: [&str; 4] = [
     "replayed_termination_rate",
 ];
 
+/// The arm-reach environment in training: the observation's leading values the skill is
+/// trained on ([`crate::arm_reach::ArmReachConfig::observation_dim`]).
 impl Environment for crate::arm_reach::ArmReach {
     fn observation_dim(&self) -> usize {
-        kumi_policies::observation::OBSERVATION_DIM
+        self.config().observation_dim()
     }
 
     fn action_dim(&self) -> usize {
@@ -63,7 +65,7 @@ impl Environment for crate::arm_reach::ArmReach {
     }
 
     fn reset(&mut self) -> Vec<f32> {
-        crate::arm_reach::ArmReach::reset(self).to_vec()
+        crate::arm_reach::ArmReach::reset(self)[..self.config().observation_dim()].to_vec()
     }
 
     fn step(&mut self, action: &[f32]) -> Transition {
@@ -71,7 +73,7 @@ impl Environment for crate::arm_reach::ArmReach {
         a.copy_from_slice(action);
         let o = crate::arm_reach::ArmReach::step(self, &a);
         Transition {
-            observation: o.observation.to_vec(),
+            observation: o.observation[..self.config().observation_dim()].to_vec(),
             reward: o.reward,
             terminated: o.terminated,
             truncated: o.truncated,

@@ -636,14 +636,15 @@ impl WholeBody {
     /// arm node build it: its own joints, the goal in its own base frame.
     pub fn skill_observations(&self, goals: &[Goal]) -> Vec<[f32; OBSERVATION_DIM]> {
         let (q, qd) = (self.world.joint_positions(), self.world.joint_velocities());
+        let targets = self.world.commands();
         self.arms
             .iter()
             .zip(goals)
             .map(|(arm, goal)| {
-                let r = arm.joints.clone();
-                let qa: [f64; JOINTS] = std::array::from_fn(|j| q[r.start + j]);
-                let qda: [f64; JOINTS] = std::array::from_fn(|j| qd[r.start + j]);
-                skill_obs::build(&qa, &qda, goal)
+                let at = |v: &[f64]| -> [f64; JOINTS] {
+                    std::array::from_fn(|j| v[arm.joints.start + j])
+                };
+                skill_obs::build(&at(&q), &at(&qd), &at(&targets), goal)
             })
             .collect()
     }

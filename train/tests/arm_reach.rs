@@ -127,6 +127,14 @@ fn the_observation_is_the_world_state_and_the_noisy_goal() {
         e.observation(),
         "the step returns what observation() builds"
     );
+    // The last 7 values: how far the targets lead the joints.
+    let q = e.world().joint_positions();
+    let lead: Vec<f32> = (0..7).map(|j| (e.targets()[j] - q[j]) as f32).collect();
+    assert_eq!(&o.observation[21..], lead.as_slice());
+    assert!(
+        lead.iter().any(|l| l.abs() > 1e-4),
+        "the targets lead the moving joints"
+    );
     let tool = e.tool_pose_b();
     let (p, r) = e.errors();
     assert!((p - (tool.translation.vector - e.goal().position_b).norm()).abs() < 1e-12);
@@ -304,7 +312,7 @@ fn a_step_whose_physics_blew_up_ends_the_episode_scoring_nothing() {
         assert!(lost.terminated && !lost.goal_ended, "{engine}");
         assert_eq!(
             (lost.reward, lost.observation),
-            (0.0, [0.0; 21]),
+            (0.0, [0.0; kumi_policies::observation::OBSERVATION_DIM]),
             "{engine}"
         );
         assert!(
@@ -326,7 +334,9 @@ fn a_step_whose_physics_blew_up_ends_the_episode_scoring_nothing() {
 #[test]
 fn an_evaluation_episode_stops_where_its_physics_blew_up() {
     use kumi_train::evaluate::run_episode;
-    let mut policy = |_: &[f32; 21]| Ok::<_, String>([2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    let mut policy = |_: &[f32; kumi_policies::observation::OBSERVATION_DIM]| {
+        Ok::<_, String>([2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    };
     let mut e = env(5);
     let obs = e.reset();
     let whole = run_episode(&mut e, obs, 360, &mut policy).unwrap();
@@ -343,4 +353,104 @@ fn an_evaluation_episode_stops_where_its_physics_blew_up() {
     let cut = run_episode(&mut e, obs, 360, &mut policy).unwrap();
     assert!(cut.diverged);
     assert_eq!((cut.goals.len(), cut.action_values), (0, 7));
+}
+
+#[test]
+fn tool_loads_are_drawn_as_configured() {
+    use kumi_train::arm_reach::ToolLoad;
+    use nalgebra::Vector3;
+    use rand::{Rng, SeedableRng};
+    let tool_w = Vector3::new(0.1, -0.2, 1.3);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+    // No load draws nothing: the random stream is the one without a [load] section.
+    let none = ToolLoad::default();
+    let mut twin = rng.clone();
+    assert_eq!(none.draw(&mut rng, &tool_w), kumi_worlds::Load::NONE);
+    assert_eq!(rng.random::<u64>(), twin.random::<u64>());
+    // Every goal loaded: forces within the bound, in every direction.
+    let forces = ToolLoad {
+        share: 1.0,
+        max_force_n: 50.0,
+        ..ToolLoad::default()
+    };
+    let drawn: Vec<_> = (0..400).map(|_| forces.draw(&mut rng, &tool_w)).collect();
+    assert!(drawn
+        .iter()
+        .all(|l| l.force_w.norm() <= 50.0 && l.stiffness_n_m == 0.0));
+    assert!(drawn.iter().filter(|l| l.force_w.norm() > 25.0).count() > 150);
+    let mean: Vector3<f64> = drawn.iter().map(|l| l.force_w).sum::<Vector3<f64>>() / 400.0;
+    assert!(mean.norm() < 5.0, "forces lean {mean:?} N on average");
+    // Every goal held where the tool stands.
+    let held = ToolLoad {
+        anchored_share: 1.0,
+        stiffness_n_m: [1000.0, 3000.0],
+        ..ToolLoad::default()
+    };
+    let l = held.draw(&mut rng, &tool_w);
+    assert_eq!(l.anchor_w, tool_w);
+    assert!((1000.0..=3000.0).contains(&l.stiffness_n_m));
+    // Bad settings are refused by the environment, with the section named.
+    for bad in [
+        ToolLoad {
+            share: 1.5,
+            ..forces
+        },
+        ToolLoad {
+            max_force_n: -1.0,
+            ..forces
+        },
+        ToolLoad {
+            stiffness_n_m: [3000.0, 1000.0],
+            ..held
+        },
+    ] {
+        let config = ArmReachConfig {
+            load: bad,
+            ..ArmReachConfig::default()
+        };
+        let err = ArmReach::new(model("arm"), config, 0).err().unwrap();
+        assert!(err.to_string().starts_with("[load]:"), "{err}");
+    }
+}
+
+#[test]
+fn a_held_tool_does_not_follow_its_targets() {
+    use kumi_train::arm_reach::ToolLoad;
+    // A third of the largest increments on every joint for 1 s: free, the tool travels; held
+    // by a stiff spring where it stood, it moves a fifth as far or less (the straight arm
+    // pushes hard along its length), and the targets run ahead of the joints.
+    let travel = |load: ToolLoad| {
+        let config = ArmReachConfig {
+            load,
+            ..ArmReachConfig::default()
+        };
+        let mut e = ArmReach::new(model("arm"), config, 2).unwrap();
+        e.reset();
+        let start = e.tool_pose_b().translation.vector;
+        for _ in 0..30 {
+            e.step(&[0.3; 7]);
+        }
+        let q = e.world().joint_positions();
+        let lead = e
+            .targets()
+            .iter()
+            .zip(&q)
+            .map(|(t, q)| (t - q).abs())
+            .fold(0.0, f64::max);
+        ((e.tool_pose_b().translation.vector - start).norm(), lead)
+    };
+    let (free, free_lead) = travel(ToolLoad::default());
+    let (held, held_lead) = travel(ToolLoad {
+        anchored_share: 1.0,
+        stiffness_n_m: [20_000.0, 20_000.0],
+        ..ToolLoad::default()
+    });
+    assert!(
+        free > 0.2 && held < 0.2 * free,
+        "free {free} m, held {held} m"
+    );
+    assert!(
+        held_lead > 5.0 * free_lead,
+        "lead free {free_lead}, held {held_lead} rad"
+    );
 }

@@ -85,11 +85,13 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
     let expected = observation::build(
         &std::array::from_fn(|j| q_reach[j]),
         &std::array::from_fn(|j| qd_reach[j]),
+        &reach.targets(),
         &goal,
     );
+    // The arm-reach environment's own observation, its goal (values 14-20) replaced.
     assert_eq!(expected, {
         let mut o = reach.observation();
-        o[14..].copy_from_slice(&expected[14..]);
+        o[14..21].copy_from_slice(&expected[14..21]);
         o
     });
 
@@ -675,10 +677,15 @@ fn excursion_from_home(home: [f64; 7]) -> Vec<f64> {
     });
     let mut excursions = Vec::new();
     for _ in 0..90 {
-        let (q, qd) = (world.joint_positions(), world.joint_velocities());
+        let (q, qd, targets) = (
+            world.joint_positions(),
+            world.joint_velocities(),
+            world.commands(),
+        );
         let obs = observation::build(
             &std::array::from_fn(|j| q[j]),
             &std::array::from_fn(|j| qd[j]),
+            &std::array::from_fn(|j| targets[j]),
             &goal,
         );
         let action = policy.act(&obs).unwrap();

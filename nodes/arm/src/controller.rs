@@ -4,11 +4,11 @@
 //!
 //! **Who owns the servo targets.** Increments are applied to the targets by whoever holds them,
 //! through [`kumi_model::commands::apply_increments`] (the one rule: add, then clamp to the joint range).
-//! With the sim bridge, the bridge holds them: the node sends the skill's increments as they are
-//! and keeps no copy, so a `joint_set` from another publisher, a restarted bridge or a clamped
-//! command cannot leave the node computing from targets that no longer exist. With Motion Stack
-//! (absolute targets) the node holds them itself, starting from the measured joint angles and
-//! starting over from them whenever it resumes after holding.
+//! The node always keeps its own targets, starting from the measured joint angles and starting
+//! over from them whenever it resumes after holding, because the skill observes how far they
+//! lead the joints. It sends them as absolute targets (`joint_set`, the sim bridge's and Motion
+//! Stack's form). A skill of the first format (Table I's observation, no targets) may instead
+//! send bare increments to the sim bridge, which then holds the targets itself.
 use kumi_model::commands::apply_increments;
 use kumi_model::Actuator;
 use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
@@ -112,10 +112,18 @@ impl ArmController {
         self.joints.as_ref()
     }
 
-    /// The observation the policy would see now, if there is a goal and a joint state.
+    /// The observation the policy would see now, if there is a goal and a joint state. The
+    /// targets are the node's own, or the measured angles before the first step and after a
+    /// hold (where the next step starts them, as training's reset does).
     pub fn observation(&self) -> Option<[f32; OBSERVATION_DIM]> {
         let (j, _) = self.joints.as_ref()?;
-        Some(observation::build(&j.q, &j.qd, self.goal.as_ref()?))
+        let targets = self.targets.unwrap_or(j.q);
+        Some(observation::build(
+            &j.q,
+            &j.qd,
+            &targets,
+            self.goal.as_ref()?,
+        ))
     }
 
     /// A hold: zero increments; the node's targets (Motion Stack) stay where they are for
@@ -254,7 +262,12 @@ mod tests {
         // The observation is the shared builder's.
         assert_eq!(
             cmd.observation,
-            Some(observation::build(&[0.98; 7], &[0.0; 7], &goal()))
+            Some(observation::build(
+                &[0.98; 7],
+                &[0.0; 7],
+                &[0.98; 7],
+                &goal()
+            ))
         );
         // Targets accumulate while the policy runs ...
         let next = c.step(0.0).targets.unwrap();

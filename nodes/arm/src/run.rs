@@ -17,7 +17,7 @@ use kumi_msgs::rosgraph_msgs::Clock;
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_msgs::std_msgs::{Float64MultiArray, Header};
 use kumi_policies::kinematics::ToolKinematics;
-use kumi_policies::observation::JOINTS;
+use kumi_policies::observation::{JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::{ArmSkill, SkillError};
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_runtime::{BackendChoice, RuntimeError, SkillPolicy};
@@ -107,6 +107,9 @@ pub enum ArmNodeError {
 /// module, policy or model fails fast with its own message.
 pub struct Prepared {
     pub controller: ArmController,
+    /// The skill observes how far its targets lead the joints, so the node must hold them
+    /// ([`Output::JointSet`]).
+    pub reads_targets: bool,
     pub rules: GoalRules,
     kinematics: ToolKinematics,
     base_frame: String,
@@ -131,6 +134,7 @@ impl Prepared {
         let control_hz = kumi_model::commands::CONTROL_HZ;
         let skill = ArmSkill::new(module, control_hz)?;
         let mut policy = SkillPolicy::load(&config.policy, &skill, config.backend)?;
+        let reads_targets = policy.observation_dim() == OBSERVATION_DIM;
         info!(
             "{}: policy {} ({} backend)",
             config.module,
@@ -147,6 +151,7 @@ impl Prepared {
                 Box::new(move |obs| policy.act(obs).map_err(|e| e.to_string())),
                 config.stale_after_s,
             ),
+            reads_targets,
             rules: GoalRules {
                 // The module's base frame as `/tf` names it (empty: the same, by convention).
                 frames: vec![topics::frame(&config.robot, &module.root_link)],
@@ -236,11 +241,16 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         &kumi_ros::rosout::logger_name(&format!("/{robot}/{module}"), "arm_node"),
     )?;
     let hardware = config.hardware.as_deref();
-    let output = if hardware.is_some() {
+    let output = if hardware.is_some() || prepared.reads_targets {
         Output::JointSet
     } else {
         config.output
     };
+    if output != config.output {
+        info!(
+            "{module}: sending absolute targets on joint_set: the node holds the targets its skill observes"
+        );
+    }
     let output_topic = match (hardware, output) {
         (Some(profile), _) => profile.joint_set(module),
         (None, Output::Increments) => topics::joint_increments(robot, module),

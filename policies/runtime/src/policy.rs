@@ -253,6 +253,8 @@ impl Network {
 #[derive(Debug)]
 pub struct SkillPolicy {
     net: Network,
+    /// How many leading observation values the network reads ([`ArmSkill::check`]).
+    observation_dim: usize,
 }
 
 impl SkillPolicy {
@@ -273,16 +275,24 @@ impl SkillPolicy {
         choice: BackendChoice,
     ) -> Result<Self, RuntimeError> {
         let file = decode(bytes, label)?;
-        skill
-            .check(&file.metadata)
-            .map_err(|mismatch| RuntimeError::Metadata {
-                path: label.to_string(),
-                module: skill.module.clone(),
-                mismatch: Box::new(mismatch),
-            })?;
+        let observation_dim =
+            skill
+                .check(&file.metadata)
+                .map_err(|mismatch| RuntimeError::Metadata {
+                    path: label.to_string(),
+                    module: skill.module.clone(),
+                    mismatch: Box::new(mismatch),
+                })?;
         Ok(Self {
-            net: Network::new(file, label, choice, OBSERVATION_DIM, JOINTS)?,
+            net: Network::new(file, label, choice, observation_dim, JOINTS)?,
+            observation_dim,
         })
+    }
+
+    /// How many leading values of the observation the policy reads: all of them, or Table
+    /// I's 21 for a skill exported before the targets' lead was observed.
+    pub fn observation_dim(&self) -> usize {
+        self.observation_dim
     }
 
     /// The policy's action (7 values, to be clipped and scaled by
@@ -291,7 +301,7 @@ impl SkillPolicy {
         &mut self,
         observation: &[f32; OBSERVATION_DIM],
     ) -> Result<[f32; JOINTS], RuntimeError> {
-        let out = self.net.run(observation)?;
+        let out = self.net.run(&observation[..self.observation_dim])?;
         Ok(std::array::from_fn(|j| out[j]))
     }
 
@@ -301,7 +311,16 @@ impl SkillPolicy {
         &mut self,
         observations: &[[f32; OBSERVATION_DIM]],
     ) -> Result<Vec<[f32; JOINTS]>, RuntimeError> {
-        let out = self.net.run(observations.as_flattened())?;
+        let out = if self.observation_dim == OBSERVATION_DIM {
+            self.net.run(observations.as_flattened())?
+        } else {
+            let read: Vec<f32> = observations
+                .iter()
+                .flat_map(|o| &o[..self.observation_dim])
+                .copied()
+                .collect();
+            self.net.run(&read)?
+        };
         Ok(out
             .chunks_exact(JOINTS)
             .map(|row| std::array::from_fn(|j| row[j]))
