@@ -197,8 +197,10 @@ impl SkillDriver {
             world.joint_velocities(),
             world.commands(),
         );
+        let q = self.at(&q);
+        let tool_b = self.kinematics.tool_pose_b(&q);
         let observation =
-            observation::build(&self.at(&q), &self.at(&qd), &self.at(&targets), &self.goal);
+            observation::build(&q, &self.at(&qd), &self.at(&targets), &self.goal, &tool_b);
         let action = self.policy.act(&observation)?;
         world.apply_increments(&self.module, &self.skill.increments(&action))?;
         Ok(())

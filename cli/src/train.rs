@@ -639,7 +639,7 @@ fn train_arm(args: TrainArmArgs) -> Result<()> {
                     weights: file.reward,
                     goals: goals.clone(),
                     load: file.load,
-                    observe_targets: file.observation.targets_lead,
+                    observation: file.observation,
                     ..ArmReachConfig::default()
                 },
                 config.seed.wrapping_mul(1000).wrapping_add(i as u64),

@@ -3,9 +3,12 @@
 //! values come from [`crate::skill::ArmSkill::metadata`]; [`crate::skill::ArmSkill::check`]
 //! compares them with the module a policy is asked to drive.
 
-/// Format tag of the low-level arm-reaching skill: it reads the whole observation, the targets'
-/// lead included ([`crate::observation::OBSERVATION_DIM`] values).
-pub const ARM_REACH_FORMAT: &str = "kumi-skill/arm-reach/2";
+/// Format tag of the low-level arm-reaching skill that reads the whole observation, the tool's
+/// error included ([`crate::observation::OBSERVATION_DIM`] values).
+pub const ARM_REACH_FORMAT: &str = "kumi-skill/arm-reach/3";
+/// Format tag of a skill that reads Table I's values and the targets' lead, the observation's
+/// leading [`crate::observation::LEAD_DIM`].
+pub const ARM_REACH_FORMAT_LEAD: &str = "kumi-skill/arm-reach/2";
 /// Format tag of a skill that reads Table I's values only, the observation's leading
 /// [`crate::observation::BASE_DIM`].
 pub const ARM_REACH_FORMAT_BASE: &str = "kumi-skill/arm-reach/1";

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use kumi_model::ModuleInstance;
 
 use crate::metadata;
-use crate::observation::{BASE_DIM, JOINTS, OBSERVATION_DIM, OBSERVATION_NAMES};
+use crate::observation::{BASE_DIM, JOINTS, LEAD_DIM, OBSERVATION_DIM, OBSERVATION_NAMES};
 
 /// The bound [policy units] the skill's action values are clipped to before they are scaled
 /// to joint increments ([`ArmSkill::increments`]).
@@ -125,8 +125,9 @@ impl ArmSkill {
     }
 
     /// The metadata an exported policy of this skill carries, reading the leading
-    /// `observation_dim` observation values ([`OBSERVATION_DIM`], or [`BASE_DIM`] for Table I's
-    /// observation, format `kumi-skill/arm-reach/1`). `config_hash` identifies the training
+    /// `observation_dim` observation values ([`OBSERVATION_DIM`]; [`LEAD_DIM`], format
+    /// `kumi-skill/arm-reach/2`; or [`BASE_DIM`] for Table I's observation, format
+    /// `kumi-skill/arm-reach/1`). `config_hash` identifies the training
     /// config, `env_steps` how long it trained.
     pub fn metadata(
         &self,
@@ -147,10 +148,10 @@ impl ArmSkill {
     /// The entries a policy reading the leading `observation_dim` observation values must
     /// match to drive this module.
     fn contract(&self, observation_dim: usize) -> BTreeMap<String, String> {
-        let format = if observation_dim == BASE_DIM {
-            metadata::ARM_REACH_FORMAT_BASE
-        } else {
-            metadata::ARM_REACH_FORMAT
+        let format = match observation_dim {
+            BASE_DIM => metadata::ARM_REACH_FORMAT_BASE,
+            LEAD_DIM => metadata::ARM_REACH_FORMAT_LEAD,
+            _ => metadata::ARM_REACH_FORMAT,
         };
         [
             (metadata::FORMAT, format.to_string()),
@@ -172,13 +173,14 @@ impl ArmSkill {
 
     /// Checks a policy's metadata against this module: format, observation layout, sizes,
     /// joint names and order, action scale and clip, and control rate must all agree. Returns
-    /// how many leading observation values the policy reads: [`OBSERVATION_DIM`], or
-    /// [`BASE_DIM`] for a skill of format `kumi-skill/arm-reach/1`.
+    /// how many leading observation values the policy reads: [`OBSERVATION_DIM`], [`LEAD_DIM`]
+    /// for a skill of format `kumi-skill/arm-reach/2` or [`BASE_DIM`] for `/1`.
     pub fn check(&self, found: &BTreeMap<String, String>) -> Result<usize, MetadataMismatch> {
         // Keys are checked in a fixed order so that the first error names the root cause
         // (a foreign file fails on its format, not on some later key).
         let observation_dim = match found.get(metadata::FORMAT).map(String::as_str) {
             Some(metadata::ARM_REACH_FORMAT_BASE) => BASE_DIM,
+            Some(metadata::ARM_REACH_FORMAT_LEAD) => LEAD_DIM,
             _ => OBSERVATION_DIM,
         };
         let contract = self.contract(observation_dim);
@@ -264,8 +266,11 @@ mod tests {
             m[metadata::ACTION_SCALE],
             "0.05,0.05,0.05,0.05,0.05,0.05,0.05"
         );
-        assert_eq!(m[metadata::OBSERVATION_DIM_KEY], "28");
+        assert_eq!(m[metadata::OBSERVATION_DIM_KEY], "34");
         assert_eq!(skill.check(&m), Ok(OBSERVATION_DIM));
+        let lead = skill.metadata(LEAD_DIM, "abc", 10);
+        assert_eq!(lead[metadata::FORMAT], metadata::ARM_REACH_FORMAT_LEAD);
+        assert_eq!(skill.check(&lead), Ok(LEAD_DIM));
     }
 
     #[test]

@@ -44,23 +44,29 @@ fn use_onnxruntime() {
 }
 
 #[test]
-fn a_skill_of_the_first_format_reads_the_leading_21_values() {
-    use kumi_policies::observation::BASE_DIM;
+fn skills_of_the_first_formats_read_the_leading_21_or_28_values() {
+    use kumi_policies::observation::{BASE_DIM, LEAD_DIM};
     use_onnxruntime();
     let skill = arm_skill(30.0);
-    let (net, norm, bytes) = random_policy(BASE_DIM, &skill.metadata(BASE_DIM, "test", 0));
+    for prefix in [BASE_DIM, LEAD_DIM] {
+        reads_the_leading(prefix, &skill);
+    }
+}
+
+fn reads_the_leading(prefix: usize, skill: &ArmSkill) {
+    let (net, norm, bytes) = random_policy(prefix, &skill.metadata(prefix, "test", 0));
     let mut rng = ChaCha8Rng::seed_from_u64(10);
     for choice in [BackendChoice::Tract, BackendChoice::OnnxRuntime] {
         let mut policy =
-            SkillPolicy::from_bytes(bytes.clone(), "table1.onnx", &skill, choice).unwrap();
-        assert_eq!(policy.observation_dim(), BASE_DIM);
+            SkillPolicy::from_bytes(bytes.clone(), "prefix.onnx", skill, choice).unwrap();
+        assert_eq!(policy.observation_dim(), prefix);
         let observations: Vec<[f32; OBSERVATION_DIM]> = (0..5)
             .map(|_| std::array::from_fn(|_| rng.random_range(-3.0..3.0)))
             .collect();
         let batch = policy.act_batch(&observations).unwrap();
         for (obs, batched) in observations.iter().zip(&batch) {
             let got = policy.act(obs).unwrap();
-            let want = net.forward(&norm.apply(&obs[..BASE_DIM]), 1);
+            let want = net.forward(&norm.apply(&obs[..prefix]), 1);
             for ((g, b), w) in got.iter().zip(batched).zip(&want) {
                 assert!(
                     (g - w).abs() <= 1e-5 && (g - b).abs() <= 1e-6,
@@ -155,7 +161,7 @@ fn a_model_of_the_wrong_shape_is_refused() {
     let text = err.to_string();
     assert!(matches!(err, RuntimeError::Shape { .. }), "{text}");
     assert!(
-        text.contains("the input has shape [batch, 20]") && text.contains("[batch, 28]"),
+        text.contains("the input has shape [batch, 20]") && text.contains("[batch, 34]"),
         "{text}"
     );
 }

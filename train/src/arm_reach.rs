@@ -34,36 +34,51 @@ pub struct ArmReachConfig {
     pub weights: ReachWeights,
     /// A force on the tool during some goals (none by default: the paper's task).
     pub load: ToolLoad,
-    /// The policy observes how far its targets lead the joints (all [`OBSERVATION_DIM`]
-    /// values, format `kumi-skill/arm-reach/2`); otherwise Table I's leading
-    /// [`observation::BASE_DIM`] (format 1, the shipped skill's).
-    pub observe_targets: bool,
+    /// What the policy observes beyond Table I's values (none: format 1, the shipped skill's).
+    pub observation: SkillObservation,
 }
 
 impl ArmReachConfig {
     /// How many leading values of the observation the policy is trained on.
     pub fn observation_dim(&self) -> usize {
-        if self.observe_targets {
-            OBSERVATION_DIM
-        } else {
-            observation::BASE_DIM
-        }
+        self.observation
+            .observation_dim()
+            .expect("checked when the environment is built")
     }
 }
 
-/// What the skill observes (`[observation]` of the training config).
+/// What the skill observes (`[observation]` of the training config). Each choice reads a
+/// prefix of the one layout ([`kumi_policies::observation`]), so the tool's error comes with
+/// the targets' lead.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SkillObservation {
     /// How far each joint's position target leads its angle, after Table I's values (format
     /// `kumi-skill/arm-reach/2`); without it, Table I's 21 values (format 1).
+    #[serde(default)]
     pub targets_lead: bool,
+    /// The goal's position less the tool's, and the rotation from the tool's orientation to the
+    /// goal's, after the lead (format `kumi-skill/arm-reach/3`; needs `targets_lead`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub tool_error: bool,
 }
 
 impl SkillObservation {
     /// Table I's observation (the section left out).
     pub fn is_table_i(&self) -> bool {
-        !self.targets_lead
+        !self.targets_lead && !self.tool_error
+    }
+
+    /// How many leading observation values this choice reads, or why it is not a layout.
+    pub fn observation_dim(&self) -> Result<usize, EnvError> {
+        match (self.targets_lead, self.tool_error) {
+            (false, false) => Ok(observation::BASE_DIM),
+            (true, false) => Ok(observation::LEAD_DIM),
+            (true, true) => Ok(OBSERVATION_DIM),
+            (false, true) => Err(EnvError::Observation(
+                "`tool_error = true` needs `targets_lead = true`: each skill format reads a prefix of one layout, and the tool's error comes after the targets' lead".into(),
+            )),
+        }
     }
 }
 
@@ -182,7 +197,7 @@ impl Default for ArmReachConfig {
             },
             weights: ReachWeights::default(),
             load: ToolLoad::default(),
-            observe_targets: false,
+            observation: SkillObservation::default(),
         }
     }
 }
@@ -197,6 +212,8 @@ pub enum EnvError {
     NotASingleArm(String),
     #[error("kinematics: {0}")]
     Kinematics(String),
+    #[error("[observation]: {0}")]
+    Observation(String),
     #[error("goal distribution: {0}")]
     Goals(String),
     /// A setting of the config that is invalid or cannot apply to this robot (the message names
@@ -328,6 +345,7 @@ impl ArmReach {
         seed: u64,
     ) -> Result<Self, EnvError> {
         config.load.validate()?;
+        config.observation.observation_dim()?;
         let not_arm = || EnvError::NotASingleArm(model.name.clone());
         if !model.fixed_base || model.modules.len() != 1 {
             return Err(not_arm());
@@ -480,7 +498,8 @@ impl ArmReach {
     /// The observation the policy sees now (with the noisy goal).
     pub fn observation(&self) -> [f32; OBSERVATION_DIM] {
         let (q, qd) = self.joints();
-        observation::build(&q, &qd, &self.targets(), &self.observed_goal)
+        let tool_b = self.kinematics.tool_pose_b(&q);
+        observation::build(&q, &qd, &self.targets(), &self.observed_goal, &tool_b)
     }
 
     /// The joints' position targets [rad], which the skill's increments move.
@@ -553,7 +572,13 @@ impl ArmReach {
         }
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
         StepOutcome {
-            observation: observation::build(&q, &qd, &targets, &self.observed_goal),
+            observation: observation::build(
+                &q,
+                &qd,
+                &targets,
+                &self.observed_goal,
+                &self.kinematics.tool_pose_b(&q),
+            ),
             reward: terms.total(),
             terms,
             truncated: self.step >= self.config.episode_steps,

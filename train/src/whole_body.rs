@@ -14,6 +14,7 @@ use std::ops::Range;
 use std::sync::Arc;
 
 use kumi_model::{ActuatorMode, RobotModel, Role};
+use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::{self as skill_obs, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy};
@@ -219,6 +220,8 @@ impl CriticObservation {
 struct ArmIo {
     module: String,
     skill: ArmSkill,
+    /// Its tool pose in its base frame from its joints (the skill observes the tool's error).
+    kinematics: ToolKinematics,
     /// Its joints in the world's actuator vectors.
     joints: Range<usize>,
 }
@@ -330,6 +333,7 @@ impl WholeBody {
             arms.push(ArmIo {
                 module: name.clone(),
                 skill: ArmSkill::new(module, sim.control_hz)?,
+                kinematics: ToolKinematics::new(&model, module).map_err(EnvError::Kinematics)?,
                 joints: world.module_range(name)?,
             });
         }
@@ -644,7 +648,9 @@ impl WholeBody {
                 let at = |v: &[f64]| -> [f64; JOINTS] {
                     std::array::from_fn(|j| v[arm.joints.start + j])
                 };
-                skill_obs::build(&at(&q), &at(&qd), &at(&targets), goal)
+                let q = at(&q);
+                let tool_b = arm.kinematics.tool_pose_b(&q);
+                skill_obs::build(&q, &at(&qd), &at(&targets), goal, &tool_b)
             })
             .collect()
     }

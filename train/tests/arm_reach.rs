@@ -127,10 +127,10 @@ fn the_observation_is_the_world_state_and_the_noisy_goal() {
         e.observation(),
         "the step returns what observation() builds"
     );
-    // The last 7 values: how far the targets lead the joints.
+    // Values 22-28: how far the targets lead the joints.
     let q = e.world().joint_positions();
     let lead: Vec<f32> = (0..7).map(|j| (e.targets()[j] - q[j]) as f32).collect();
-    assert_eq!(&o.observation[21..], lead.as_slice());
+    assert_eq!(&o.observation[21..28], lead.as_slice());
     assert!(
         lead.iter().any(|l| l.abs() > 1e-4),
         "the targets lead the moving joints"
@@ -139,6 +139,41 @@ fn the_observation_is_the_world_state_and_the_noisy_goal() {
     let (p, r) = e.errors();
     assert!((p - (tool.translation.vector - e.goal().position_b).norm()).abs() < 1e-12);
     assert!(r >= 0.0);
+    // Values 29-34: the observed goal less the tool, which forward kinematics of the measured
+    // angles puts where the simulator has it, to within the servos' compliance.
+    let to_goal = e.observed_goal().position_b - tool.translation.vector;
+    for i in 0..3 {
+        assert!(
+            (f64::from(o.observation[28 + i]) - to_goal[i]).abs() < 2e-3,
+            "{:?} against {to_goal:?}",
+            &o.observation[28..31]
+        );
+    }
+    let turn = (e.observed_goal().orientation_b * tool.rotation.inverse()).angle();
+    let observed = nalgebra::Vector3::from_fn(|i, _| f64::from(o.observation[31 + i]));
+    assert!(
+        (observed.norm() - turn).abs() < 2e-3,
+        "{observed:?} against {turn}"
+    );
+}
+
+#[test]
+fn the_tool_error_is_observed_only_after_the_lead() {
+    use kumi_train::arm_reach::SkillObservation;
+    let config = |targets_lead, tool_error| ArmReachConfig {
+        observation: SkillObservation {
+            targets_lead,
+            tool_error,
+        },
+        ..ArmReachConfig::default()
+    };
+    let dim =
+        |c: ArmReachConfig| ArmReach::new(model("arm"), c, 0).map(|e| e.config().observation_dim());
+    assert_eq!(dim(config(false, false)).unwrap(), 21);
+    assert_eq!(dim(config(true, false)).unwrap(), 28);
+    assert_eq!(dim(config(true, true)).unwrap(), 34);
+    let err = dim(config(false, true)).unwrap_err().to_string();
+    assert!(err.contains("targets_lead"), "{err}");
 }
 
 #[test]

@@ -4,7 +4,8 @@
 use std::sync::Arc;
 
 use kumi_model::{assemble, load_morphology, ModuleLibrary, RobotModel};
-use kumi_policies::observation::{self, Goal};
+use kumi_policies::kinematics::ToolKinematics;
+use kumi_policies::observation::{self, Goal, LEAD_DIM};
 use kumi_terms::action::{GoalBounds, JointBounds};
 use kumi_train::arm_reach::{ArmReach, ArmReachConfig};
 use kumi_train::body_reward::{rock_penalty, turn_penalty, BodyWeights, PenaltyWeights};
@@ -73,7 +74,8 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
     // module of Tricycle in turn. The skill observation the whole-body term builds for that
     // module, for a goal in its base frame, must equal the arm-reach observation's bits, and
     // the tool pose in the module's base frame must agree (the goal frame is the same frame).
-    let mut reach = ArmReach::new(model("arm"), ArmReachConfig::default(), 5).unwrap();
+    let reach_model = model("arm");
+    let mut reach = ArmReach::new(reach_model.clone(), ArmReachConfig::default(), 5).unwrap();
     reach.reset();
     let q_reach = reach.world().joint_positions();
     let qd_reach = reach.world().joint_velocities();
@@ -82,18 +84,26 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
         position_b: Vector3::new(0.5, -0.1, 0.9),
         orientation_b: UnitQuaternion::from_euler_angles(0.3, -0.2, 0.1),
     };
+    let q_arm: [f64; 7] = std::array::from_fn(|j| q_reach[j]);
+    let fk = ToolKinematics::new(&reach_model, &reach_model.modules[0]).unwrap();
     let expected = observation::build(
-        &std::array::from_fn(|j| q_reach[j]),
+        &q_arm,
         &std::array::from_fn(|j| qd_reach[j]),
         &reach.targets(),
         &goal,
+        &fk.tool_pose_b(&q_arm),
     );
-    // The arm-reach environment's own observation, its goal (values 14-20) replaced.
-    assert_eq!(expected, {
-        let mut o = reach.observation();
-        o[14..21].copy_from_slice(&expected[14..21]);
-        o
-    });
+    // The arm-reach environment's own observation is the same function's, for its own goal.
+    assert_eq!(
+        reach.observation(),
+        observation::build(
+            &q_arm,
+            &std::array::from_fn(|j| qd_reach[j]),
+            &reach.targets(),
+            &reach.observed_goal(),
+            &fk.tool_pose_b(&q_arm),
+        )
+    );
 
     let tricycle = model("tricycle");
     let mut env = WholeBody::new(tricycle.clone(), config(0.785), &skill(), 1).unwrap();
@@ -112,11 +122,25 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
         });
         let goals = vec![goal; arms.len()];
         let built = env.skill_observations(&goals)[k];
+        // Table I's values and the lead, bit for bit; the tool's error is forward kinematics
+        // through the module's mount on Tricycle, which may round its last bits otherwise.
         assert_eq!(
-            built.map(f32::to_bits),
-            expected.map(f32::to_bits),
+            built[..LEAD_DIM]
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>(),
+            expected[..LEAD_DIM]
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>(),
             "module {module}"
         );
+        for (b, e) in built[LEAD_DIM..].iter().zip(&expected[LEAD_DIM..]) {
+            assert!(
+                (b - e).abs() < 1e-6,
+                "module {module}: {built:?} against {expected:?}"
+            );
+        }
         let m = tricycle.module(module).unwrap();
         let world = env.world();
         let tool_b = world.link_pose(&m.root_link).unwrap().inverse()
@@ -650,7 +674,6 @@ const EXCURSION_MAX_M: f64 = 0.3;
 
 /// The tool's distance [m] from the goal at each of 90 steps (3 s).
 fn excursion_from_home(home: [f64; 7]) -> Vec<f64> {
-    use kumi_policies::kinematics::ToolKinematics;
     use kumi_policies::skill::ArmSkill;
     let arm = model("arm");
     let sim = kumi_worlds::SimConfig::for_model(&arm);
@@ -664,9 +687,8 @@ fn excursion_from_home(home: [f64; 7]) -> Vec<f64> {
         kumi_runtime::BackendChoice::Tract,
     )
     .unwrap();
-    let pose = ToolKinematics::new(&arm, module)
-        .unwrap()
-        .tool_pose_b(&home);
+    let kinematics = ToolKinematics::new(&arm, module).unwrap();
+    let pose = kinematics.tool_pose_b(&home);
     let goal = Goal {
         position_b: pose.translation.vector,
         orientation_b: pose.rotation,
@@ -682,11 +704,13 @@ fn excursion_from_home(home: [f64; 7]) -> Vec<f64> {
             world.joint_velocities(),
             world.commands(),
         );
+        let q: [f64; 7] = std::array::from_fn(|j| q[j]);
         let obs = observation::build(
-            &std::array::from_fn(|j| q[j]),
+            &q,
             &std::array::from_fn(|j| qd[j]),
             &std::array::from_fn(|j| targets[j]),
             &goal,
+            &kinematics.tool_pose_b(&q),
         );
         let action = policy.act(&obs).unwrap();
         world

@@ -13,11 +13,16 @@ use kumi_model::commands::apply_increments;
 use kumi_model::Actuator;
 use kumi_policies::observation::{self, Goal, JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::ArmSkill;
+use nalgebra::Isometry3;
 
 use crate::joints::Joints;
 
 /// A policy: observation in, action (7 values in policy units) out.
 pub type PolicyFn = Box<dyn FnMut(&[f32; OBSERVATION_DIM]) -> Result<[f32; JOINTS], String> + Send>;
+
+/// The module's forward kinematics: the tool pose in its base frame from its joint angles
+/// [rad] ([`kumi_policies::kinematics::ToolKinematics::tool_pose_b`] on a robot).
+pub type ToolFn = Box<dyn Fn(&[f64; JOINTS]) -> Isometry3<f64> + Send>;
 
 /// Why a step held the arm still instead of running the policy.
 #[derive(Debug, Clone, PartialEq)]
@@ -52,6 +57,7 @@ pub struct Command {
 pub struct ArmController {
     skill: ArmSkill,
     actuators: Vec<Actuator>,
+    tool_pose_b: ToolFn,
     policy: PolicyFn,
     stale_after_s: f64,
     goal: Option<Goal>,
@@ -63,16 +69,19 @@ pub struct ArmController {
 
 impl ArmController {
     /// A controller for the module `skill` describes, with its position `actuators` (for the
-    /// joint limits), a policy, and the joint-state age [s] beyond which it holds.
+    /// joint limits), its forward kinematics, a policy, and the joint-state age [s] beyond
+    /// which it holds.
     pub fn new(
         skill: ArmSkill,
         actuators: Vec<Actuator>,
+        tool_pose_b: ToolFn,
         policy: PolicyFn,
         stale_after_s: f64,
     ) -> Self {
         Self {
             skill,
             actuators,
+            tool_pose_b,
             policy,
             stale_after_s,
             goal: None,
@@ -123,6 +132,7 @@ impl ArmController {
             &j.qd,
             &targets,
             self.goal.as_ref()?,
+            &(self.tool_pose_b)(&j.q),
         ))
     }
 
@@ -212,9 +222,15 @@ mod tests {
         ArmController::new(
             ArmSkill::new(&m, 30.0).unwrap(),
             m.actuators.clone(),
+            Box::new(tool_pose_b),
             policy,
             0.2,
         )
+    }
+
+    /// A stand-in for forward kinematics: the tool 1 m up, moved along x by joint1's angle.
+    fn tool_pose_b(q: &[f64; JOINTS]) -> Isometry3<f64> {
+        Isometry3::translation(q[0], 0.0, 1.0)
     }
 
     fn goal() -> Goal {
@@ -266,7 +282,8 @@ mod tests {
                 &[0.98; 7],
                 &[0.0; 7],
                 &[0.98; 7],
-                &goal()
+                &goal(),
+                &tool_pose_b(&[0.98; 7])
             ))
         );
         // Targets accumulate while the policy runs ...

@@ -17,7 +17,7 @@ use kumi_msgs::rosgraph_msgs::Clock;
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_msgs::std_msgs::{Float64MultiArray, Header};
 use kumi_policies::kinematics::ToolKinematics;
-use kumi_policies::observation::{JOINTS, OBSERVATION_DIM};
+use kumi_policies::observation::{BASE_DIM, JOINTS};
 use kumi_policies::skill::{ArmSkill, SkillError};
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_runtime::{BackendChoice, RuntimeError, SkillPolicy};
@@ -134,7 +134,7 @@ impl Prepared {
         let control_hz = kumi_model::commands::CONTROL_HZ;
         let skill = ArmSkill::new(module, control_hz)?;
         let mut policy = SkillPolicy::load(&config.policy, &skill, config.backend)?;
-        let reads_targets = policy.observation_dim() == OBSERVATION_DIM;
+        let reads_targets = policy.observation_dim() > BASE_DIM;
         info!(
             "{}: policy {} ({} backend)",
             config.module,
@@ -148,6 +148,10 @@ impl Prepared {
             controller: ArmController::new(
                 skill,
                 actuators,
+                {
+                    let kinematics = kinematics.clone();
+                    Box::new(move |q| kinematics.tool_pose_b(q))
+                },
                 Box::new(move |obs| policy.act(obs).map_err(|e| e.to_string())),
                 config.stale_after_s,
             ),
