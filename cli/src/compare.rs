@@ -707,6 +707,7 @@ mod tests {
                     positions.len(),
                 ),
                 action_noise: 0.0,
+                push: None,
                 episodes,
                 action_names: Vec::new(),
             },

@@ -58,13 +58,15 @@ pub struct DemoArgs {
     pub json: bool,
 }
 
-/// Where targets are drawn: within `xy_m` of the start along x and y, height in `z_m`.
+/// Where targets are drawn: within `xy_m` of the robot's base along x and y, height in `z_m`.
 struct TargetRange {
     xy_m: f64,
     z_m: [f64; 2],
 }
 
-/// The targets of a run: seeded, within the range the policy was trained on.
+/// The targets of a run, each relative to where the base stands when it is sent ([`place`]):
+/// seeded, within the range the policy was trained on (training draws each episode's target
+/// around a base that starts near the origin).
 fn draw_targets(n: usize, seed: u64, range: &TargetRange) -> Vec<Target> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     (0..n)
@@ -77,6 +79,16 @@ fn draw_targets(n: usize, seed: u64, range: &TargetRange) -> Vec<Target> {
             yaw: rng.random_range(-PI..PI),
         })
         .collect()
+}
+
+/// A drawn target placed around the base standing at `base_xy` [m]: a target drawn around the
+/// start would be out of the trained range (and refused by the whole-body node) once the robot
+/// has moved.
+fn place(offset: &Target, base_xy: [f64; 2]) -> Target {
+    Target {
+        position_w: offset.position_w + Vector3::new(base_xy[0], base_xy[1], 0.0),
+        yaw: offset.yaw,
+    }
 }
 
 /// One sample of the run, as the CSV has it.
@@ -200,12 +212,21 @@ pub fn run(args: DemoArgs) -> Result<()> {
         &mut launched,
     );
     launched.stop(Duration::from_secs(5));
-    let (samples, tipped) = result?;
-    report(&robot, &targets, &samples, tipped.as_ref(), &out, args.json)
+    let (placed, samples, tipped) = result?;
+    report(
+        &robot,
+        &placed,
+        targets.len(),
+        &samples,
+        tipped.as_ref(),
+        &out,
+        args.json,
+    )
 }
 
-/// Sends the targets one by one and records the run. A robot that tilts past `tilt_limit_rad`
-/// has tipped over (the whole-body node stops driving it): the remaining targets are not sent.
+/// Sends the targets one by one, each placed around where the base stands then, and records
+/// the run; returns the targets as sent. A robot that tilts past `tilt_limit_rad` has tipped
+/// over (the whole-body node stops driving it): the remaining targets are not sent.
 #[allow(clippy::too_many_arguments)]
 fn drive(
     model: &kumi_model::RobotModel,
@@ -216,7 +237,7 @@ fn drive(
     tilt_limit_rad: Option<f64>,
     shutdown: &AtomicBool,
     launched: &mut Launch,
-) -> Result<(Vec<Sample>, Option<TippedOver>)> {
+) -> Result<(Vec<Target>, Vec<Sample>, Option<TippedOver>)> {
     let mut node = RosNode::new(&format!("/{robot}"), "demo", domain)?;
     let publisher =
         node.publisher::<PoseStamped>(&topics::robot_goal_pose(robot), qos::default())?;
@@ -248,10 +269,14 @@ fn drive(
     let mut t_end = 0.0_f64;
     let mut tipped = None;
     let mut last_sample_at = Instant::now();
-    for (i, target) in targets.iter().enumerate() {
+    let mut placed = Vec::new();
+    for (i, offset) in targets.iter().enumerate() {
         let t_start = t_end;
         let mut sent_at = None::<Instant>;
         let mut moved = false;
+        read_odometry(&odom, &mut base, &mut tilt_now, &mut tilt_rad);
+        let target = &place(offset, [base[0], base[1]]);
+        placed.push(*target);
         loop {
             if shutdown.load(Ordering::Relaxed) {
                 bail!("interrupted");
@@ -265,19 +290,11 @@ fn drive(
                 let _ = publisher.publish(target_msg(target, &frame));
                 sent_at = Some(Instant::now());
             }
-            while let Some(msg) = odom.take() {
-                if let Ok((m, _)) = msg {
-                    let p = m.pose.pose.position;
-                    let rotation = geometry::isometry(&m.pose.pose).map(|iso| iso.rotation);
-                    base = [p.x, p.y, rotation.map_or(0.0, |r| tool_yaw(&r))];
-                    tilt_now = rotation.map_or(0.0, |r| tilt(&r));
-                    tilt_rad = tilt_rad.max(tilt_now);
-                }
-            }
+            read_odometry(&odom, &mut base, &mut tilt_now, &mut tilt_rad);
             let mut done = false;
             while let Some(msg) = tool.take() {
                 let Ok((m, _)) = msg else { continue };
-                let Some(pose) = geometry::isometry(&m.pose) else {
+                let Ok(pose) = geometry::isometry(&m.pose) else {
                     continue;
                 };
                 let t = m.header.stamp.seconds();
@@ -336,13 +353,35 @@ fn drive(
             break;
         }
     }
-    Ok((samples, tipped))
+    Ok((placed, samples, tipped))
+}
+
+/// Takes the odometry waiting: the base's x, y and yaw, its tilt now and the largest since the
+/// last sample.
+fn read_odometry(
+    odom: &kumi_ros::StrictSubscription<Odometry>,
+    base: &mut [f64; 3],
+    tilt_now: &mut f64,
+    tilt_rad: &mut f64,
+) {
+    while let Some(msg) = odom.take() {
+        if let Ok((m, _)) = msg {
+            let p = m.pose.pose.position;
+            let rotation = geometry::isometry(&m.pose.pose)
+                .ok()
+                .map(|iso| iso.rotation);
+            *base = [p.x, p.y, rotation.map_or(0.0, |r| tool_yaw(&r))];
+            *tilt_now = rotation.map_or(0.0, |r| tilt(&r));
+            *tilt_rad = tilt_rad.max(*tilt_now);
+        }
+    }
 }
 
 /// Writes the CSV and the plot; prints the table (or the JSON object).
 fn report(
     robot: &str,
     targets: &[Target],
+    drawn: usize,
     samples: &[Sample],
     tipped: Option<&TippedOver>,
     out: &std::path::Path,
@@ -353,8 +392,7 @@ fn report(
         "t_s,target,target_x_m,target_y_m,target_z_m,target_yaw_rad,base_x_m,base_y_m,base_yaw_rad,base_tilt_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,position_error_m,yaw_error_rad\n",
     );
     let mut outcomes = Vec::new();
-    let sent = tipped.map_or(targets.len(), |t| t.target + 1);
-    for (i, target) in targets.iter().enumerate().take(sent) {
+    for (i, target) in targets.iter().enumerate() {
         let mine: Vec<&Sample> = samples.iter().filter(|s| s.target == i).collect();
         let start = mine.first().map_or(0.0, |s| s.t_s);
         let mut reached = None;
@@ -433,7 +471,7 @@ fn report(
     let report = Report {
         robot: robot.to_string(),
         targets: outcomes,
-        skipped: targets.len() - sent,
+        skipped: drawn - targets.len(),
         plot: svg_path.display().to_string(),
         csv: csv_path.display().to_string(),
     };
@@ -487,5 +525,27 @@ mod tests {
         let b = draw_targets(20, 4, &range);
         assert_eq!(a[7].position_w, b[7].position_w);
         assert_ne!(draw_targets(1, 5, &range)[0].position_w, a[0].position_w);
+    }
+
+    #[test]
+    fn each_target_is_placed_around_where_the_base_stands() {
+        let offset = Target {
+            position_w: Vector3::new(2.5, -3.0, 1.2),
+            yaw: 0.4,
+        };
+        let t = place(&offset, [4.0, 1.0]);
+        assert_eq!(t.position_w, Vector3::new(6.5, -2.0, 1.2));
+        assert_eq!(t.yaw, 0.4);
+        // However far the robot has gone, the target is as far from it as training's are
+        // from a base starting at the origin: within the whole-body node's 4.5 m.
+        let range = TargetRange {
+            xy_m: 3.0,
+            z_m: [0.9, 1.5],
+        };
+        for offset in draw_targets(200, 11, &range) {
+            let t = place(&offset, [-7.0, 5.0]);
+            let d = (t.position_w.x + 7.0).hypot(t.position_w.y - 5.0);
+            assert!(d <= 3.0 * 2f64.sqrt() && d < 4.5, "{d}");
+        }
     }
 }

@@ -555,11 +555,7 @@ fn train<E: Environment>(
         let s = trainer.iterate();
         let wall = start.elapsed().as_secs_f64();
         writeln!(csv, "{}", row(&s, wall))?;
-        let figures: Vec<String> = s
-            .metrics
-            .iter()
-            .map(|(name, v)| format!("{name} {v:.3}"))
-            .collect();
+        let figures: Vec<String> = s.metrics.iter().map(|(n, v)| figure(n, *v)).collect();
         let status = format!(
             "{:.0} steps/s collect, {:.0} samples/s update | reward/step {:.3} | {} | std {:.3}",
             s.collect_steps_per_s,
@@ -753,8 +749,29 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
     Ok(())
 }
 
+/// One figure of the progress line: a metric no episode gave this iteration (NaN: none
+/// ended) is a dash.
+fn figure(name: &str, value: f64) -> String {
+    if value.is_finite() {
+        format!("{name} {value:.3}")
+    } else {
+        format!("{name} -")
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_metric_no_episode_gave_prints_as_a_dash() {
+        assert_eq!(
+            super::figure("termination_rate", 0.25),
+            "termination_rate 0.250"
+        );
+        assert_eq!(
+            super::figure("termination_rate", f64::NAN),
+            "termination_rate -"
+        );
+    }
 
     #[test]
     fn the_shipped_skill_config_keeps_the_shipped_skills_fingerprint() {

@@ -536,6 +536,28 @@ fn action_noise_in_evaluation_changes_episodes_reproducibly_and_must_be_a_std() 
         eval("0.5"),
         "the same noise again: seeded by the episode"
     );
+    // The pushes are in the JSON too, as the markdown reports them.
+    assert!(clean["push"].is_null(), "{clean}");
+    let pushed: serde_json::Value = kumi_json(&[
+        "eval",
+        "whole-body",
+        "minimal",
+        "--rollouts",
+        "1",
+        "--backend",
+        "tract",
+        "--engine",
+        "rapier",
+        "--push-m-s",
+        "0.5",
+        "--json",
+    ]);
+    assert_eq!(
+        pushed["push"]["velocity_m_s"].as_f64(),
+        Some(0.5),
+        "{pushed}"
+    );
+    assert!(pushed["push"]["interval_s"].is_array(), "{pushed}");
     let bad = kumi(&["eval", "whole-body", "minimal", "--action-noise=-1"]);
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success() && err.contains("at least 0"), "{err}");

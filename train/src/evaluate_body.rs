@@ -18,7 +18,7 @@ use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 use crate::evaluate::{wilson_interval_95, ErrorStats, EvalError};
-use crate::whole_body::{WholeBody, WholeBodyConfig};
+use crate::whole_body::{PushConfig, WholeBody, WholeBodyConfig};
 
 /// The result, as `kumi eval whole-body --json` prints it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -49,6 +49,9 @@ pub struct BodyEvaluation {
     /// deterministic policy.
     #[serde(default)]
     pub action_noise: f64,
+    /// The pushes the episodes met (`null`: none).
+    #[serde(default)]
+    pub push: Option<PushConfig>,
     /// Every episode's outcome, in seed order (for plots; not printed).
     #[serde(skip)]
     pub episodes: Vec<Episode>,
@@ -463,6 +466,7 @@ where
         diverged: episodes.iter().filter(|e| e.diverged).count(),
         terminations_per_1000_95: BodyEvaluation::terminations_per_1000_95(terminations, rollouts),
         action_noise,
+        push: config.push,
         episodes,
         action_names: config
             .arms
@@ -490,6 +494,7 @@ mod tests {
             diverged: 0,
             terminations_per_1000_95: BodyEvaluation::terminations_per_1000_95(67, 300),
             action_noise: 0.0,
+            push: None,
             episodes: Vec::new(),
             action_names: Vec::new(),
         };

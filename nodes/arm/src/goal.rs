@@ -3,10 +3,8 @@
 
 use kumi_msgs::geometry_msgs::PoseStamped;
 use kumi_policies::observation::Goal;
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use kumi_ros::geometry::PoseError;
 
-/// How far a quaternion's norm may be from 1 and still be normalised rather than refused.
-pub const QUATERNION_NORM_TOLERANCE: f64 = 0.1;
 /// Goals further than the arm's reach plus this margin [m] are refused. It covers every goal
 /// a shipped whole-body policy can send: Dragon's leg stands straight up, its home tool at its
 /// full reach (1.46 m), and its goals may lie up to 0.17 m further (0.1 m along each axis); a
@@ -27,10 +25,8 @@ pub fn reach_m(kinematics: &kumi_policies::kinematics::ToolKinematics) -> f64 {
 /// Why a goal was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum GoalRejection {
-    #[error("goal has a non-finite value")]
-    NonFinite,
-    #[error("goal quaternion has norm {0:.3}: not a rotation (a zero quaternion is not a goal)")]
-    NotARotation(f64),
+    #[error("goal is not a pose: {0}")]
+    NotAPose(#[from] PoseError),
     #[error(
         "goal is in frame `{found}`; this node takes goals in `{expected}` (or an empty frame id)"
     )]
@@ -49,8 +45,8 @@ pub struct GoalRules {
 }
 
 impl GoalRules {
-    /// Checks and converts a goal message. A near-unit quaternion is normalised; an exactly
-    /// unit one (within 1e-9) is kept bit for bit.
+    /// Checks and converts a goal message: a pose by the one rule for every pose
+    /// ([`kumi_ros::geometry::isometry`]), in the module's base frame, within reach.
     pub fn accept(&self, msg: &PoseStamped) -> Result<Goal, GoalRejection> {
         let frame = &msg.header.frame_id;
         if !frame.is_empty() && !self.frames.iter().any(|f| f == frame) {
@@ -59,22 +55,8 @@ impl GoalRules {
                 expected: self.frames.first().cloned().unwrap_or_default(),
             });
         }
-        let p = &msg.pose.position;
-        let o = &msg.pose.orientation;
-        let values = [p.x, p.y, p.z, o.w, o.x, o.y, o.z];
-        if values.iter().any(|v| !v.is_finite()) {
-            return Err(GoalRejection::NonFinite);
-        }
-        let q = Quaternion::new(o.w, o.x, o.y, o.z);
-        let norm = q.norm();
-        let orientation = if (norm - 1.0).abs() <= 1e-9 {
-            UnitQuaternion::new_unchecked(q)
-        } else if (norm - 1.0).abs() <= QUATERNION_NORM_TOLERANCE {
-            UnitQuaternion::new_normalize(q)
-        } else {
-            return Err(GoalRejection::NotARotation(norm));
-        };
-        let position = Vector3::new(p.x, p.y, p.z);
+        let pose = kumi_ros::geometry::isometry(&msg.pose)?;
+        let position = pose.translation.vector;
         let distance = position.norm();
         if distance > self.reach + WORKSPACE_MARGIN {
             return Err(GoalRejection::OutOfReach {
@@ -84,7 +66,7 @@ impl GoalRules {
         }
         Ok(Goal {
             position_b: position,
-            orientation_b: orientation,
+            orientation_b: pose.rotation,
         })
     }
 }
@@ -129,7 +111,7 @@ mod tests {
         let g = rules()
             .accept(&msg("", [0.3, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0]))
             .unwrap();
-        assert_eq!(g.position_b, Vector3::new(0.3, 0.0, 1.0));
+        assert_eq!(g.position_b, nalgebra::Vector3::new(0.3, 0.0, 1.0));
         assert!(rules()
             .accept(&msg(
                 "robot/arm/base",
@@ -152,11 +134,11 @@ mod tests {
         let r = rules();
         assert_eq!(
             r.accept(&msg("", [f64::NAN, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0])),
-            Err(GoalRejection::NonFinite)
+            Err(GoalRejection::NotAPose(PoseError::NonFinite))
         );
         assert_eq!(
             r.accept(&msg("", [0.3, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0])),
-            Err(GoalRejection::NotARotation(0.0))
+            Err(GoalRejection::NotAPose(PoseError::NotARotation(0.0)))
         );
         assert!(matches!(
             r.accept(&msg("map", [0.3, 0.0, 1.0], [1.0, 0.0, 0.0, 0.0])),

@@ -323,6 +323,8 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     let mut latest_stamp = Time::default();
     let mut goal_sync = GoalSync::new(config.goal_sync_s);
     let mut goal_stamp: Option<f64> = None;
+    // Ticks in a row acted on without their goal: warned once per run of them.
+    let mut late_in_row: u64 = 0;
     let mut report = Report::default();
     let mut report_at = Instant::now();
     let mut liveliness_at = Instant::now();
@@ -477,11 +479,17 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                     }
                     Sync::Late => {
                         report.late_goals += 1;
-                        if log.check(Instant::now()).is_some() {
-                            warn!("{module}: no goal for the tick at {t:.3} s within {:.3} s; acting on the previous one", config.goal_sync_s);
+                        late_in_row += 1;
+                        if late_in_row == 1 {
+                            warn!("{module}: no goal for the tick at {t:.3} s within {:.3} s; acting on the previous one until goals come again (each such tick counts in late_goals on /diagnostics)", config.goal_sync_s);
                         }
                     }
-                    Sync::Ready => {}
+                    Sync::Ready => {
+                        if late_in_row > 0 {
+                            info!("{module}: goals are back after {late_in_row} ticks without one");
+                            late_in_row = 0;
+                        }
+                    }
                 }
             }
         }

@@ -39,28 +39,39 @@ pub fn transform(iso: &Isometry3<f64>) -> Transform {
     }
 }
 
-/// The isometry of a pose message, if its quaternion can be normalised (non-zero, finite). A
-/// quaternion within 1e-9 of unit length is taken as it is.
-pub fn isometry(pose: &Pose) -> Option<Isometry3<f64>> {
+/// How far a pose's quaternion norm may be from 1 and still be normalised rather than refused:
+/// the one rule for every pose kumi reads (goals, targets, odometry).
+pub const QUATERNION_NORM_TOLERANCE: f64 = 0.1;
+
+/// Why a pose message is not a pose.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PoseError {
+    #[error("a non-finite value")]
+    NonFinite,
+    #[error("its quaternion has norm {0:.3}, not within {QUATERNION_NORM_TOLERANCE} of 1: not a rotation")]
+    NotARotation(f64),
+}
+
+/// The isometry of a pose message: every value finite, and a quaternion whose norm is within
+/// [`QUATERNION_NORM_TOLERANCE`] of 1, normalised. A quaternion within 1e-9 of unit length is
+/// taken as it is, so that what a node publishes another reads back bit for bit.
+pub fn isometry(pose: &Pose) -> Result<Isometry3<f64>, PoseError> {
     let p = pose.position;
     let o = pose.orientation;
     let values = [p.x, p.y, p.z, o.x, o.y, o.z, o.w];
     if values.iter().any(|v| !v.is_finite()) {
-        return None;
+        return Err(PoseError::NonFinite);
     }
     let q = nalgebra::Quaternion::new(o.w, o.x, o.y, o.z);
     let norm = q.norm();
-    if norm < 1e-9 {
-        return None;
-    }
-    // A quaternion that is a unit one to within rounding is kept bit for bit: what a node
-    // publishes, another reads back unchanged.
     let unit = if (norm - 1.0).abs() <= 1e-9 {
         q
-    } else {
+    } else if (norm - 1.0).abs() <= QUATERNION_NORM_TOLERANCE {
         q / norm
+    } else {
+        return Err(PoseError::NotARotation(norm));
     };
-    Some(Isometry3::from_parts(
+    Ok(Isometry3::from_parts(
         Translation3::new(p.x, p.y, p.z),
         UnitQuaternion::new_unchecked(unit),
     ))
@@ -86,9 +97,33 @@ mod tests {
             z: 0.0,
             w: 0.0,
         };
-        assert!(isometry(&zero).is_none());
+        assert_eq!(isometry(&zero), Err(PoseError::NotARotation(0.0)));
         let mut nan = pose(&iso);
         nan.position.x = f64::NAN;
-        assert!(isometry(&nan).is_none());
+        assert_eq!(isometry(&nan), Err(PoseError::NonFinite));
+    }
+
+    #[test]
+    fn one_rule_for_a_quaternion_near_unit_length() {
+        let with_w = |w: f64| Pose {
+            orientation: Quaternion {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w,
+            },
+            ..Default::default()
+        };
+        // Within 0.1 of unit length: normalised; a unit one (to within 1e-9) is kept bit for bit.
+        for w in [0.91, 1.0, 1.09] {
+            let r = isometry(&with_w(w)).unwrap().rotation;
+            assert_eq!(r.w, 1.0, "norm {w}");
+        }
+        let kept = isometry(&with_w(1.0 + 1e-12)).unwrap().rotation;
+        assert_eq!(kept.w, 1.0 + 1e-12);
+        // Beyond it, however close to a rotation its direction is, refused with the norm.
+        for w in [1e-9, 0.5, 0.89, 1.11, 2.0] {
+            assert_eq!(isometry(&with_w(w)), Err(PoseError::NotARotation(w)));
+        }
     }
 }

@@ -27,7 +27,7 @@ use kumi_runtime::{BackendChoice, ModelFile, RuntimeError, WholeBodyPolicy};
 use kumi_terms::{ActionTerms, GoalBounds, ObservationOptions};
 use nalgebra::Vector3;
 use ros2_client::Publisher;
-use tracing::{info, warn};
+use tracing::{debug, info, warn};
 
 use crate::controller::{Decision, Hold, WholeBodyController};
 use crate::report::Report;
@@ -294,10 +294,10 @@ fn open_io(
 }
 
 /// The base state of an odometry message: pose in its frame, twist (linear and angular)
-/// turned from the child (base) frame into it. `None` when a value is not finite or the
-/// quaternion is zero.
+/// turned from the child (base) frame into it. `None` when a value is not finite or the pose is
+/// not one ([`geometry::isometry`]).
 pub fn base_state(msg: &Odometry) -> Option<BaseState> {
-    let pose_w = geometry::isometry(&msg.pose.pose)?;
+    let pose_w = geometry::isometry(&msg.pose.pose).ok()?;
     let (v, w) = (msg.twist.twist.linear, msg.twist.twist.angular);
     let v_b = Vector3::new(v.x, v.y, v.z);
     let w_b = Vector3::new(w.x, w.y, w.z);
@@ -593,7 +593,7 @@ pub fn run(
                     None => {
                         report.odometry_rejected += 1;
                         if log.check(Instant::now()).is_some() {
-                            warn!("odometry rejected: a non-finite value or a zero quaternion");
+                            warn!("odometry rejected: a non-finite value or a quaternion that is not a rotation");
                         }
                     }
                 },
@@ -707,7 +707,11 @@ pub fn run(
                 report.target_since_s = Some(stamp.seconds());
             }
             if let Some(h @ (Hold::Stale { .. } | Hold::PolicyFailed(_))) = &decision.hold {
-                if hold_log.check(Instant::now()).is_some() {
+                // Before the first target nothing is commanded, and in lockstep simulated time
+                // stands still until one comes: old odometry then is no news.
+                if controller.target().is_none() {
+                    debug!("holding before the first target: {h}");
+                } else if hold_log.check(Instant::now()).is_some() {
                     warn!("holding: {h}");
                 }
             }

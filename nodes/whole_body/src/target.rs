@@ -2,14 +2,15 @@
 //! position and heading (the yaw of the pose's x axis) are used, as in training.
 
 use kumi_msgs::geometry_msgs::PoseStamped;
+use kumi_ros::geometry::PoseError;
 use kumi_terms::observation::tool_yaw;
 use kumi_terms::Target;
 
 /// Why a target was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TargetRejection {
-    #[error("target has a non-finite value or a zero quaternion")]
-    NotAPose,
+    #[error("target is not a pose: {0}")]
+    NotAPose(#[from] PoseError),
     #[error("target is in frame `{found}`; this node takes targets in `{expected}` (or an empty frame id)")]
     UnknownFrame { found: String, expected: String },
     #[error("target is {distance_m:.2} m from the robot's base, more than the {limit_m:.1} m this node accepts")]
@@ -32,7 +33,7 @@ pub fn accept(
             expected: odom_frame.to_string(),
         });
     }
-    let pose = kumi_ros::geometry::isometry(&msg.pose).ok_or(TargetRejection::NotAPose)?;
+    let pose = kumi_ros::geometry::isometry(&msg.pose)?;
     let p = pose.translation.vector;
     if let Some([x, y]) = base_xy {
         let distance_m = (p.x - x).hypot(p.y - y);
@@ -89,13 +90,14 @@ mod tests {
         ));
         assert_eq!(
             accept(&msg("", f64::NAN, 0.0), "r/odom", None, 5.0),
-            Err(TargetRejection::NotAPose)
+            Err(TargetRejection::NotAPose(PoseError::NonFinite))
         );
-        let mut zero = msg("", 0.0, 0.0);
-        zero.pose.orientation.w = 0.0;
+        // The arm node's rule: a quaternion far from unit length is not a rotation.
+        let mut tiny = msg("", 0.0, 0.0);
+        tiny.pose.orientation.w = 1e-9;
         assert_eq!(
-            accept(&zero, "r/odom", None, 5.0),
-            Err(TargetRejection::NotAPose)
+            accept(&tiny, "r/odom", None, 5.0),
+            Err(TargetRejection::NotAPose(PoseError::NotARotation(1e-9)))
         );
         assert!(matches!(
             accept(&msg("", 9.0, 0.0), "r/odom", Some([0.0, 0.0]), 5.0),
