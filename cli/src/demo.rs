@@ -164,7 +164,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         hardware: None,
         profile: None,
     };
-    launch::check_policy(&model, &launch_args)?;
+    launch::check_policy(&model, &launch_args, None)?;
     let (range, tilt_limit_rad) =
         match crate::train::read_body_config(None, &robot, crate::train::Variant::Hierarchical) {
             Ok(c) => (

@@ -315,10 +315,9 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
         &model.name,
         args.variant,
     )?;
-    let path = args
-        .policy
-        .clone()
-        .unwrap_or_else(|| args.variant.shipped_policy(&model.name));
+    let path =
+        args.variant
+            .require_policy(&model.name, &args.morphology, args.policy.as_deref(), None)?;
     let skill_path = args
         .skill
         .clone()

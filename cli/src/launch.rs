@@ -9,6 +9,7 @@
 //! loop would hide the cause. The nodes themselves survive a peer's restart, so a node can be
 //! restarted by hand (`--without` leaves one out to start it elsewhere).
 
+use crate::train::Variant;
 use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -176,8 +177,11 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
             s("--morphology"),
             args.morphology.clone(),
         ];
-        if let Some(p) = &args.policy {
-            a.extend([s("--policy"), p.display().to_string()]);
+        // A policy trained for a robot kumi does not ship is named: the node looks for the
+        // shipped one only.
+        let policy = whole_body_policy(&model.name, args);
+        if args.policy.is_some() || policy != Variant::Hierarchical.shipped_policy(&model.name) {
+            a.extend([s("--policy"), policy.display().to_string()]);
         }
         if let Some(p) = &args.skill {
             a.extend([s("--skill"), p.display().to_string()]);
@@ -366,20 +370,27 @@ pub fn load_profile(
     kumi_ros::motion_stack::MotionStackProfile::load(path, &modules).map_err(anyhow::Error::msg)
 }
 
-/// Fails, saying how to get one, when the robot has no whole-body policy to launch with.
-pub fn check_policy(model: &kumi_model::RobotModel, args: &LaunchArgs) -> Result<()> {
-    let policy = args
-        .policy
+/// The whole-body policy a launch of `robot` runs: `--policy`, else the shipped one, else the
+/// one `kumi train whole-body` wrote ([`Variant::default_policy`]).
+pub fn whole_body_policy(robot: &str, args: &LaunchArgs) -> PathBuf {
+    args.policy
         .clone()
-        .unwrap_or_else(|| kumi_runtime::shipped_whole_body_policy(&model.name));
-    if !policy.exists() {
-        bail!(
-            "no whole-body policy for `{}` at {}: train one (`kumi train whole-body {}`) and pass --policy, or launch with --no-whole-body",
-            model.name,
-            policy.display(),
-            args.morphology
-        );
-    }
+        .unwrap_or_else(|| Variant::Hierarchical.default_policy(robot))
+}
+
+/// Fails, saying how to get one, when the robot has no whole-body policy to launch with.
+/// `otherwise` is what else the command can do without one (`--no-whole-body` for a launch).
+pub fn check_policy(
+    model: &kumi_model::RobotModel,
+    args: &LaunchArgs,
+    otherwise: Option<&str>,
+) -> Result<()> {
+    Variant::Hierarchical.require_policy(
+        &model.name,
+        &args.morphology,
+        args.policy.as_deref(),
+        otherwise,
+    )?;
     Ok(())
 }
 
@@ -393,7 +404,7 @@ pub fn run(args: LaunchArgs) -> Result<()> {
     }
     let nodes = plan(&model, &args)?;
     if !args.no_whole_body {
-        check_policy(&model, &args)?;
+        check_policy(&model, &args, Some("launch with --no-whole-body"))?;
     }
     let domain = std::env::var("ROS_DOMAIN_ID").unwrap_or_else(|_| "0".into());
     eprintln!(

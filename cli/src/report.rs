@@ -31,9 +31,14 @@ pub enum ReportCommand {
 
 #[derive(Args)]
 pub struct GoalBoundsArgs {
-    /// Robots to report (shipped names; their whole-body configs give the bounds).
+    /// Robots to report: shipped names or morphology files; their whole-body configs give the
+    /// bounds.
     #[arg(long, value_delimiter = ',', default_value = "minimal,dragon,tricycle")]
     pub morphologies: Vec<String>,
+    /// The whole-body config giving the bounds (default: each robot's shipped one), for one
+    /// robot only: a robot that is not shipped needs its own.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// The skill's training config, whose `[goals]` are the training goals (default: shipped).
     #[arg(long)]
     pub skill_config: Option<PathBuf>,
@@ -112,6 +117,10 @@ fn nearest(goal: &Goal, training: &[Goal]) -> (f64, f64) {
 
 fn goal_bounds(args: GoalBoundsArgs) -> Result<()> {
     anyhow::ensure!(args.samples > 0, "--samples must be positive");
+    anyhow::ensure!(
+        args.config.is_none() || args.morphologies.len() == 1,
+        "--config gives one robot's bounds: name one robot with --morphologies"
+    );
     if let Some(out) = &args.out {
         crate::output::check_file(out, "--out")?;
     }
@@ -129,10 +138,14 @@ fn goal_bounds(args: GoalBoundsArgs) -> Result<()> {
     let paper = distribution.paper_box;
     let reference = args.samples * 10;
     let mut rows = Vec::new();
-    for robot in &args.morphologies {
-        let config =
-            crate::train::read_body_config(None, robot, crate::train::Variant::Hierarchical)?;
-        let model = assemble(&load_morphology(robot, &library)?, &library);
+    for morphology in &args.morphologies {
+        let model = assemble(&load_morphology(morphology, &library)?, &library);
+        let robot = &model.name;
+        let config = crate::train::read_body_config(
+            args.config.as_deref(),
+            robot,
+            crate::train::Variant::Hierarchical,
+        )?;
         let terms = ActionTerms::new(&model, &config.goal_bounds()?)
             .with_context(|| format!("the action terms of {robot}"))?;
         for term in terms.arms() {

@@ -166,6 +166,56 @@ impl Variant {
         kumi_runtime::shipped_policy(&self.policy_name(robot))
     }
 
+    /// Where `kumi train whole-body` writes this variant's policy for `robot` by default:
+    /// `runs/<name>/<name>.onnx`.
+    pub fn trained_policy(self, robot: &str) -> PathBuf {
+        let name = self.policy_name(robot);
+        PathBuf::from("runs")
+            .join(&name)
+            .join(format!("{name}.onnx"))
+    }
+
+    /// The policy a command uses when none is named: the shipped one, or, for a robot kumi does
+    /// not ship, the one `kumi train whole-body` wrote ([`Self::trained_policy`]).
+    pub fn default_policy(self, robot: &str) -> PathBuf {
+        let shipped = self.shipped_policy(robot);
+        let trained = self.trained_policy(robot);
+        if !shipped.exists() && trained.exists() {
+            trained
+        } else {
+            shipped
+        }
+    }
+
+    /// The policy a command runs (`named`, else [`Self::default_policy`]), or an error that
+    /// says where it looked and how to get one; `otherwise` is what else the command can do
+    /// without one (a launch: `--no-whole-body`).
+    pub fn require_policy(
+        self,
+        robot: &str,
+        morphology: &str,
+        named: Option<&std::path::Path>,
+        otherwise: Option<&str>,
+    ) -> Result<PathBuf> {
+        let policy = named.map_or_else(|| self.default_policy(robot), PathBuf::from);
+        if policy.exists() {
+            return Ok(policy);
+        }
+        let or = otherwise.map_or(String::new(), |o| format!(", or {o}"));
+        if named.is_some() {
+            bail!("no policy file at {}{or}", policy.display());
+        }
+        let variant = match self {
+            Variant::Hierarchical => String::new(),
+            other => format!(" --variant {other}"),
+        };
+        bail!(
+            "no {self} policy for `{robot}`: none is shipped ({shipped}) and training has not written {trained}. Train one with `kumi train whole-body {morphology}{variant} --config CONFIG` (it writes {trained}, which this command then finds; CONFIG: docs/config-reference.md) or pass --policy FILE{or}",
+            shipped = self.shipped_policy(robot).display(),
+            trained = self.trained_policy(robot).display(),
+        )
+    }
+
     fn config_dir(self) -> &'static str {
         match self {
             Variant::Hierarchical => "whole_body",
@@ -349,7 +399,7 @@ fn read_config_from<'a>(
         None => match shipped.find(|(name, v, _)| *name == robot && *v == variant) {
             Some((_, _, text)) => (text.to_string(), format!("the shipped {variant} config for {robot}")),
             None => bail!(
-                "no shipped {variant} whole-body config for robot `{robot}`: pass --config FILE (start from train/configs/{}/tricycle.toml)",
+                "no shipped {variant} whole-body config for robot `{robot}`: pass --config FILE (start from train/configs/{}/dragon.toml, as examples/caterpillar_whole_body.toml does, and set [task] target_z_m around your robot's tool heights)",
                 variant.config_dir()
             ),
         },

@@ -1,5 +1,6 @@
 //! `kumi whole-body`: the whole-body node, running a robot's upper-level policy.
 
+use crate::train::Variant;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -75,7 +76,7 @@ pub fn run(args: WholeBodyArgs) -> Result<()> {
     let config = WholeBodyNodeConfig {
         policy: args
             .policy
-            .unwrap_or_else(|| kumi_runtime::shipped_whole_body_policy(&model.name)),
+            .unwrap_or_else(|| Variant::Hierarchical.default_policy(&model.name)),
         skill: args.skill.unwrap_or_else(kumi_runtime::shipped_arm_policy),
         robot: args.robot,
         backend: args.backend,

@@ -945,6 +945,60 @@ fn the_example_morphology_stands_and_its_whole_body_task_builds() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(err.contains("no-such-policy.onnx"), "{err}");
+
+    // Without --policy, evaluation looks where training writes (relative to where it runs),
+    // and says so, with a training command that names its config.
+    let dir = std::env::temp_dir().join(format!("kumi-new-robot-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let eval = || {
+        Command::new(env!("CARGO_BIN_EXE_kumi"))
+            .args(["eval", "whole-body", &morphology, "--config", &config])
+            .current_dir(&dir)
+            .output()
+            .unwrap()
+    };
+    let trained = "runs/caterpillar_whole_body/caterpillar_whole_body.onnx";
+    let out = eval();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains(trained) && err.contains("--config CONFIG"),
+        "{err}"
+    );
+    // With a file there, it is the one evaluated (this one is no policy: refused by name).
+    std::fs::create_dir_all(dir.join("runs/caterpillar_whole_body")).unwrap();
+    std::fs::write(dir.join(trained), b"not a policy").unwrap();
+    let out = eval();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains(trained) && !err.contains("training has not written"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+
+    // The goal bounds of a robot kumi does not ship come from its config.
+    let bounds: serde_json::Value = kumi_json(&[
+        "report",
+        "goal-bounds",
+        "--morphologies",
+        &morphology,
+        "--config",
+        &config,
+        "--samples",
+        "20",
+        "--json",
+    ]);
+    assert!(bounds.to_string().contains("caterpillar"), "{bounds}");
+    let both = kumi(&[
+        "report",
+        "goal-bounds",
+        "--morphologies",
+        &format!("minimal,{morphology}"),
+        "--config",
+        &config,
+    ]);
+    assert!(!both.status.success());
 }
 
 #[test]
