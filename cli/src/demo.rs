@@ -36,9 +36,13 @@ pub struct DemoArgs {
     /// Seed of the targets.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Simulated seconds per target (the training episodes' length).
-    #[arg(long, default_value_t = 12.0)]
-    pub seconds: f64,
+    /// Simulated seconds per target (default: the policy's training episodes' length).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// The base tilt [rad] past which the robot has tipped over (default: the one the policy
+    /// was trained with, from its metadata).
+    #[arg(long)]
+    pub tilt_limit_rad: Option<f64>,
     /// Where the plot, the CSV and the nodes' log go (default: runs/demo-<robot>).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -146,7 +150,7 @@ fn target_msg(target: &Target, frame: &str) -> PoseStamped {
 }
 
 pub fn run(args: DemoArgs) -> Result<()> {
-    if args.targets == 0 || !(args.seconds.is_finite() && args.seconds > 0.0) {
+    if args.targets == 0 || args.seconds.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
         bail!("--targets and --seconds must be positive");
     }
     let model = load_model(&args.morphology)?;
@@ -159,29 +163,46 @@ pub fn run(args: DemoArgs) -> Result<()> {
         without: Vec::new(),
         no_whole_body: false,
         policy: args.policy.clone(),
+        tilt_limit_rad: args.tilt_limit_rad,
         skill: None,
         backend: Some("tract".into()),
         hardware: None,
         profile: None,
     };
     launch::check_policy(&model, &launch_args, None)?;
-    let (range, tilt_limit_rad) =
-        match crate::train::read_body_config(None, &robot, crate::train::Variant::Hierarchical) {
-            Ok(c) => (
+    let policy = launch::whole_body_policy(&model.name, &launch_args);
+    let (range, tilt_limit_rad, seconds) = match crate::whole_body::trained_task(&policy, &robot)? {
+        Some((task, from)) => {
+            eprintln!(
+                "demo: targets within {} m of the base at heights {}-{} m, {} s each, tipped over past {} rad ({from})",
+                task.target_xy_m, task.target_z_m[0], task.target_z_m[1], task.episode_s, task.tilt_limit_rad
+            );
+            (
                 TargetRange {
-                    xy_m: c.task.target_xy_m,
-                    z_m: c.task.target_z_m,
+                    xy_m: task.target_xy_m,
+                    z_m: task.target_z_m,
                 },
-                Some(c.task.tilt_limit_rad),
-            ),
-            Err(_) => (
+                Some(task.tilt_limit_rad),
+                task.episode_s,
+            )
+        }
+        None => {
+            eprintln!(
+                "demo: {} carries no training task (exported by an older kumi) and kumi ships no config for `{robot}`: targets within 3 m at heights 0.9-1.5 m, 12 s each, and no tilt limit unless --tilt-limit-rad gives one",
+                policy.display()
+            );
+            (
                 TargetRange {
                     xy_m: 3.0,
                     z_m: [0.9, 1.5],
                 },
                 None,
-            ),
-        };
+                12.0,
+            )
+        }
+    };
+    let tilt_limit_rad = args.tilt_limit_rad.or(tilt_limit_rad);
+    let seconds = args.seconds.unwrap_or(seconds);
     let targets = draw_targets(args.targets, args.seed, &range);
     let out = args
         .out
@@ -206,7 +227,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         &robot,
         domain,
         &targets,
-        &args,
+        seconds,
         tilt_limit_rad,
         &shutdown,
         &mut launched,
@@ -233,7 +254,7 @@ fn drive(
     robot: &str,
     domain: u16,
     targets: &[Target],
-    args: &DemoArgs,
+    seconds: f64,
     tilt_limit_rad: Option<f64>,
     shutdown: &AtomicBool,
     launched: &mut Launch,
@@ -311,7 +332,7 @@ fn drive(
                     tool: pose,
                 });
                 last_sample_at = Instant::now();
-                done |= t >= t_start + args.seconds;
+                done |= t >= t_start + seconds;
                 if tipped.is_none() && tilt_limit_rad.is_some_and(|limit| tilt_rad > limit) {
                     tipped = Some(TippedOver {
                         target: i,

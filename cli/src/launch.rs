@@ -44,9 +44,14 @@ pub struct LaunchArgs {
     /// No whole-body node: arm goals come from elsewhere (`ros2 topic pub`).
     #[arg(long)]
     pub no_whole_body: bool,
-    /// The whole-body policy (default: the shipped policies/<morphology>_whole_body/<morphology>_whole_body.onnx).
+    /// The whole-body policy (default: the shipped policies/<robot>_whole_body/<robot>_whole_body.onnx,
+    /// else the one training wrote, runs/<robot>_whole_body/<robot>_whole_body.onnx).
     #[arg(long)]
     pub policy: Option<PathBuf>,
+    /// The base tilt [rad] past which the whole-body node stops driving (default: the one the
+    /// policy was trained with, from its metadata).
+    #[arg(long)]
+    pub tilt_limit_rad: Option<f64>,
     /// The skill every arm node runs (default: the shipped policies/arm_reach/arm_reach.onnx).
     #[arg(long)]
     pub skill: Option<PathBuf>,
@@ -185,6 +190,9 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
         }
         if let Some(p) = &args.skill {
             a.extend([s("--skill"), p.display().to_string()]);
+        }
+        if let Some(t) = args.tilt_limit_rad {
+            a.extend([s("--tilt-limit-rad"), t.to_string()]);
         }
         if let Some(p) = &hardware {
             a.extend([s("--hardware"), p.clone()]);
@@ -450,6 +458,7 @@ mod tests {
             without: Vec::new(),
             no_whole_body: false,
             policy: None,
+            tilt_limit_rad: None,
             skill: None,
             backend: None,
             hardware: None,

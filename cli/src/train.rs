@@ -755,6 +755,9 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
         kumi_policies::metadata::CONFIG_HASH.into(),
         kumi_policies::metadata::fingerprint(&serde_json::to_string(&trained)?),
     );
+    // What deployment reads instead of the training config: the tilt limit, the targets, the
+    // episode length.
+    metadata.extend(trained.task.trained_task().metadata());
     eprintln!(
         "{} ({}): {} observations, {} actions ({}); {}",
         model.name,

@@ -1,6 +1,7 @@
 //! `kumi whole-body`: the whole-body node, running a robot's upper-level policy.
 
 use crate::train::Variant;
+use kumi_terms::contract::TrainedTask;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -61,12 +62,16 @@ pub fn run(args: WholeBodyArgs) -> Result<()> {
         bail!("--max-target-distance must be a positive number of metres");
     }
     let model = load_model(args.morphology.as_deref().unwrap_or(&args.robot))?;
-    let tilt_limit_rad = tilt_limit(args.tilt_limit_rad, &model.name)?;
-    if let (None, Some(limit)) = (args.tilt_limit_rad, tilt_limit_rad) {
+    let policy = args
+        .policy
+        .clone()
+        .unwrap_or_else(|| Variant::Hierarchical.default_policy(&model.name));
+    let trained = trained_task(&policy, &model.name)?;
+    let tilt_limit_rad = tilt_limit(args.tilt_limit_rad, trained.as_ref().map(|(t, _)| *t))?;
+    if let (None, Some((task, from))) = (args.tilt_limit_rad, trained) {
         tracing::info!(
-            "tilt limit {limit} rad: the shipped `{}` policy's training limit (train/configs/whole_body/{}.toml); --tilt-limit-rad for another",
-            model.name,
-            model.name
+            "tilt limit {} rad: the policy's training limit ({from}); --tilt-limit-rad for another",
+            task.tilt_limit_rad
         );
     }
     let hardware = match &args.hardware {
@@ -74,9 +79,7 @@ pub fn run(args: WholeBodyArgs) -> Result<()> {
         None => None,
     };
     let config = WholeBodyNodeConfig {
-        policy: args
-            .policy
-            .unwrap_or_else(|| Variant::Hierarchical.default_policy(&model.name)),
+        policy,
         skill: args.skill.unwrap_or_else(kumi_runtime::shipped_arm_policy),
         robot: args.robot,
         backend: args.backend,
@@ -97,20 +100,42 @@ pub fn run(args: WholeBodyArgs) -> Result<()> {
 }
 
 /// The tilt limit [rad]: as given, else the one the shipped robot's policy was trained with.
-fn tilt_limit(given: Option<f64>, morphology: &str) -> Result<Option<f64>> {
+fn tilt_limit(given: Option<f64>, trained: Option<TrainedTask>) -> Result<Option<f64>> {
     match given {
         Some(limit) if !(limit.is_finite() && limit > 0.0 && limit <= std::f64::consts::PI) => {
             bail!("--tilt-limit-rad must be an angle in (0, pi], not {limit}")
         }
         Some(limit) => Ok(Some(limit)),
-        None => Ok(crate::train::read_body_config(
-            None,
-            morphology,
-            crate::train::Variant::Hierarchical,
-        )
-        .ok()
-        .map(|c| c.task.tilt_limit_rad)),
+        None => Ok(trained.map(|t| t.tilt_limit_rad)),
     }
+}
+
+/// What the policy at `path` was trained on, and where that was read: its metadata, or for a
+/// policy exported without it, the shipped config of `robot` (`None`: neither).
+pub fn trained_task(path: &std::path::Path, robot: &str) -> Result<Option<(TrainedTask, String)>> {
+    let from_file = match std::fs::read(path) {
+        Ok(bytes) => {
+            let file = kumi_runtime::ModelFile::decode(bytes)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            TrainedTask::from_metadata(&file.metadata)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?
+        }
+        // The node reports a missing policy with its own message.
+        Err(_) => None,
+    };
+    if let Some(task) = from_file {
+        return Ok(Some((task, format!("the metadata of {}", path.display()))));
+    }
+    Ok(
+        crate::train::read_shipped_policy_config(None, robot, Variant::Hierarchical)
+            .ok()
+            .map(|c| {
+                (
+                    c.task.trained_task(),
+                    format!("the shipped config train/configs/whole_body/{robot}.toml"),
+                )
+            }),
+    )
 }
 
 #[cfg(test)]
@@ -119,13 +144,21 @@ mod tests {
 
     #[test]
     fn the_tilt_limit_is_the_training_one_unless_given() {
-        assert_eq!(tilt_limit(None, "minimal").unwrap(), Some(0.6));
-        assert_eq!(tilt_limit(None, "dragon").unwrap(), Some(1.0));
-        assert_eq!(tilt_limit(None, "tricycle").unwrap(), Some(0.785));
-        assert_eq!(tilt_limit(None, "my_robot").unwrap(), None);
-        assert_eq!(tilt_limit(Some(0.5), "tricycle").unwrap(), Some(0.5));
+        let trained = |robot: &str| {
+            let policy = Variant::Hierarchical.shipped_policy(robot);
+            trained_task(&policy, robot).unwrap().map(|(t, _)| t)
+        };
+        assert_eq!(tilt_limit(None, trained("minimal")).unwrap(), Some(0.6));
+        assert_eq!(tilt_limit(None, trained("dragon")).unwrap(), Some(1.0));
+        assert_eq!(tilt_limit(None, trained("tricycle")).unwrap(), Some(0.785));
+        assert_eq!(trained("my_robot"), None);
+        assert_eq!(tilt_limit(None, None).unwrap(), None);
+        assert_eq!(
+            tilt_limit(Some(0.5), trained("tricycle")).unwrap(),
+            Some(0.5)
+        );
         for bad in [0.0, -1.0, f64::NAN, 4.0] {
-            let err = tilt_limit(Some(bad), "tricycle").unwrap_err();
+            let err = tilt_limit(Some(bad), None).unwrap_err();
             assert!(err.to_string().contains("--tilt-limit-rad"), "{err}");
         }
     }

@@ -348,6 +348,15 @@ fn whole_body_trains_evaluates_and_refuses_a_policy_for_another_robot() {
         "{csv}"
     );
     let policy = out_dir.join("minimal_whole_body.onnx");
+    // The policy carries what deployment needs of its training episodes.
+    let file = kumi_runtime::ModelFile::decode(std::fs::read(&policy).unwrap()).unwrap();
+    let task = kumi_terms::contract::TrainedTask::from_metadata(&file.metadata)
+        .unwrap()
+        .expect("the trained task is in the metadata");
+    assert_eq!(
+        (task.tilt_limit_rad, task.target_xy_m, task.episode_s),
+        (0.6, 3.0, 12.0)
+    );
     let (episodes, trace) = (out_dir.join("episodes.csv"), out_dir.join("trace.csv"));
     let v: serde_json::Value = kumi_json(&[
         "eval",

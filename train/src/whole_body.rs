@@ -53,6 +53,16 @@ pub struct TaskConfig {
 }
 
 impl TaskConfig {
+    /// What deployment needs to know of these episodes (written into the policy's metadata).
+    pub fn trained_task(&self) -> kumi_terms::contract::TrainedTask {
+        kumi_terms::contract::TrainedTask {
+            tilt_limit_rad: self.tilt_limit_rad,
+            target_xy_m: self.target_xy_m,
+            target_z_m: self.target_z_m,
+            episode_s: self.episode_s,
+        }
+    }
+
     fn check(&self) -> Result<(), EnvError> {
         let [lo, hi] = self.target_z_m;
         let ok = self.episode_s > 0.0

@@ -169,3 +169,93 @@ pub fn check(
     }
     Ok(())
 }
+
+/// The base tilt [rad] at which the policy's training episodes ended (a fall).
+pub const TILT_LIMIT: &str = "kumi.tilt_limit_rad";
+/// Its training targets: x and y within this distance [m] of the base's start.
+pub const TARGET_XY: &str = "kumi.target_xy_m";
+/// Its training targets' heights [m], `low,high`.
+pub const TARGET_Z: &str = "kumi.target_z_m";
+/// Its training episodes' length [s].
+pub const EPISODE: &str = "kumi.episode_s";
+
+/// What a whole-body policy's training episodes were, carried in its metadata so that
+/// deployment (the whole-body node, `kumi launch`, `kumi demo`) knows it without the training
+/// config: when the robot has tipped over, where targets may be drawn, how long one takes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrainedTask {
+    pub tilt_limit_rad: f64,
+    pub target_xy_m: f64,
+    pub target_z_m: [f64; 2],
+    pub episode_s: f64,
+}
+
+impl TrainedTask {
+    /// The metadata entries.
+    pub fn metadata(&self) -> [(String, String); 4] {
+        let [lo, hi] = self.target_z_m;
+        [
+            (TILT_LIMIT, self.tilt_limit_rad.to_string()),
+            (TARGET_XY, self.target_xy_m.to_string()),
+            (TARGET_Z, format!("{lo},{hi}")),
+            (EPISODE, self.episode_s.to_string()),
+        ]
+        .map(|(k, v)| (k.to_string(), v))
+    }
+
+    /// Reads the entries: `None` for a policy exported without them (an older kumi), an error
+    /// naming the key for one that is missing among the others or not a number.
+    pub fn from_metadata(found: &BTreeMap<String, String>) -> Result<Option<Self>, String> {
+        let keys = [TILT_LIMIT, TARGET_XY, TARGET_Z, EPISODE];
+        if keys.iter().all(|k| !found.contains_key(*k)) {
+            return Ok(None);
+        }
+        let number = |key: &str, text: &str| -> Result<f64, String> {
+            text.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("metadata `{key}` is `{text}`, not a number"))
+        };
+        let value = |key: &'static str| -> Result<&String, String> {
+            found
+                .get(key)
+                .ok_or_else(|| format!("metadata `{key}` is missing beside the task's other keys"))
+        };
+        let z = value(TARGET_Z)?;
+        let Some((lo, hi)) = z.split_once(',') else {
+            return Err(format!("metadata `{TARGET_Z}` is `{z}`, not `low,high`"));
+        };
+        Ok(Some(Self {
+            tilt_limit_rad: number(TILT_LIMIT, value(TILT_LIMIT)?)?,
+            target_xy_m: number(TARGET_XY, value(TARGET_XY)?)?,
+            target_z_m: [number(TARGET_Z, lo)?, number(TARGET_Z, hi)?],
+            episode_s: number(EPISODE, value(EPISODE)?)?,
+        }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_trained_task_goes_into_the_metadata_and_back() {
+        let task = TrainedTask {
+            tilt_limit_rad: 0.785,
+            target_xy_m: 3.0,
+            target_z_m: [2.05, 2.45],
+            episode_s: 12.0,
+        };
+        let mut m: BTreeMap<String, String> = task.metadata().into_iter().collect();
+        assert_eq!(m[TARGET_Z], "2.05,2.45");
+        assert_eq!(TrainedTask::from_metadata(&m), Ok(Some(task)));
+        assert_eq!(TrainedTask::from_metadata(&BTreeMap::new()), Ok(None));
+        m.insert(TILT_LIMIT.into(), "steep".into());
+        let err = TrainedTask::from_metadata(&m).unwrap_err();
+        assert!(err.contains(TILT_LIMIT) && err.contains("steep"), "{err}");
+        m.remove(TILT_LIMIT);
+        let err = TrainedTask::from_metadata(&m).unwrap_err();
+        assert!(err.contains(TILT_LIMIT) && err.contains("missing"), "{err}");
+    }
+}
