@@ -13,6 +13,7 @@ mod output;
 mod plot;
 mod policy;
 mod report;
+mod robot;
 mod sim;
 mod trace_plot;
 mod train;
@@ -44,6 +45,10 @@ enum Command {
         #[arg(long)]
         mjcf: bool,
     },
+    /// What a robot is, before training it: modules and roles, mass, each arm module's home
+    /// tool pose and standing height, the whole-body policy's sizes, whether it stands on the
+    /// skill, and what a config for it should set.
+    Robot(robot::RobotArgs),
     /// Simulate a morphology for a while and report what happened.
     Sim(sim::SimArgs),
     /// Run the sim bridge node: the simulated robot on ROS 2 (stop with Ctrl-C).
@@ -135,6 +140,7 @@ fn run() -> Result<()> {
             }
             Ok(())
         }
+        Command::Robot(args) => robot::run(args),
         Command::Sim(args) => sim::run(args),
         Command::SimBridge(args) => bridge::run(args),
         Command::Arm(args) => arm::run(args),

@@ -42,7 +42,7 @@ impl From<LayoutArg> for Layout {
 
 /// Physics overrides shared by `sim` and `bench`; unset, a robot is simulated with
 /// [`SimConfig::for_model`] (the defaults and its morphology's `[physics]` table).
-#[derive(Args, Clone, Debug)]
+#[derive(Args, Clone, Debug, Default)]
 pub struct PhysicsArgs {
     /// Physics engine: rapier (default) or mujoco (with `--features mujoco`).
     #[arg(long, value_parser = crate::engine::parse)]
@@ -245,11 +245,12 @@ fn goal_for(model: &RobotModel, module: &ModuleInstance, leg_roll_rad: f64) -> R
 }
 
 #[derive(Serialize)]
-struct SimReport {
-    morphology: String,
-    engine: String,
+pub struct SimReport {
+    pub morphology: String,
+    pub engine: String,
     config: String,
     seconds: f64,
+    control_hz: f64,
     /// Arm modules that ran the frozen skill toward their home tool pose.
     skill_on: Vec<String>,
     /// Roll asked of the legs on the skill [rad].
@@ -261,8 +262,8 @@ struct SimReport {
     realtime_factor: f64,
     base_start_m: [f64; 3],
     base_end_m: [f64; 3],
-    base_travel_xy_m: f64,
-    max_tilt_rad: f64,
+    pub base_travel_xy_m: f64,
+    pub max_tilt_rad: f64,
     lowest_point_m: f64,
     max_mount_error_m: f64,
     max_mount_error_rad: f64,
@@ -271,23 +272,34 @@ struct SimReport {
     /// largest absolute value over every arm joint and control step [rad/s]
     /// (`kumi_policies::settle::SpeedTally`; NaN for a run no longer than a second).
     arm_joint_speed_after_1s_mean_rad_s: f64,
-    arm_joint_speed_after_1s_max_rad_s: f64,
+    pub arm_joint_speed_after_1s_max_rad_s: f64,
     /// How far the arm joints' position targets lead their angles after the first second:
     /// mean and largest absolute value [rad]. A servo reaches its effort limit a few mrad
     /// from its target at rest, so a larger lead at rest is a command wound up against a load
     /// it cannot move.
     arm_target_lead_after_1s_mean_rad: f64,
-    arm_target_lead_after_1s_max_rad: f64,
-    finite: bool,
+    pub arm_target_lead_after_1s_max_rad: f64,
+    pub finite: bool,
     ground_contacts_at_end: Vec<String>,
     /// Wheel modules with no wheel on the ground, mean over the control steps (0 without
     /// wheel modules).
-    wheel_modules_off_ground_mean: f64,
+    pub wheel_modules_off_ground_mean: f64,
     /// Share of the control steps on which every wheel module touched the ground.
     all_wheel_modules_down_share: f64,
 }
 
 pub fn run(args: SimArgs) -> Result<()> {
+    let report = simulate(&args)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_report(&report);
+    }
+    Ok(())
+}
+
+/// Simulates what `args` asks and measures it.
+pub fn simulate(args: &SimArgs) -> Result<SimReport> {
     if !(args.seconds.is_finite() && args.seconds > 0.0) {
         bail!(
             "--seconds must be a positive number of seconds, got {}",
@@ -388,6 +400,7 @@ pub fn run(args: SimArgs) -> Result<()> {
         engine: engine.to_string(),
         config: config.label_for(engine),
         seconds: args.seconds,
+        control_hz: config.control_hz,
         skill_on: drivers.iter().map(|d| d.module.clone()).collect(),
         leg_roll_rad: args.leg_roll,
         skill_tracking: drivers.iter().map(|d| d.tracking(world.as_ref())).collect(),
@@ -411,68 +424,77 @@ pub fn run(args: SimArgs) -> Result<()> {
         wheel_modules_off_ground_mean: off_ground as f64 / steps.max(1) as f64,
         all_wheel_modules_down_share: all_down as f64 / steps.max(1) as f64,
     };
-    if args.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
+    Ok(report)
+}
+
+/// Prints a report as a table.
+fn print_report(report: &SimReport) {
+    let (start, end) = (report.base_start_m, report.base_end_m);
+    println!(
+        "{} for {} s simulated ({} control steps at {} Hz, {} physics {})",
+        report.morphology,
+        report.seconds,
+        report.control_steps,
+        report.control_hz,
+        report.engine,
+        report.config
+    );
+    if !report.skill_on.is_empty() {
         println!(
-            "{} for {} s simulated ({} control steps at {} Hz, {} physics {})",
-            report.morphology, report.seconds, steps, config.control_hz, engine, report.config
+            "  on the skill        {} (toward their home tool poses, legs rolled {} rad)",
+            report.skill_on.join(", "),
+            report.leg_roll_rad
         );
-        if !report.skill_on.is_empty() {
+        for t in &report.skill_tracking {
             println!(
-                "  on the skill        {} (toward their home tool poses, legs rolled {} rad)",
-                report.skill_on.join(", "),
-                report.leg_roll_rad
+                "    {:<8} tool {:.4} m, {:.3} rad from its goal; joints {:.2?} rad",
+                t.module, t.position_error_m, t.orientation_error_rad, t.joints_rad
             );
-            for t in &report.skill_tracking {
-                println!(
-                    "    {:<8} tool {:.4} m, {:.3} rad from its goal; joints {:.2?} rad",
-                    t.module, t.position_error_m, t.orientation_error_rad, t.joints_rad
-                );
-            }
         }
-        println!(
-            "  wall time           {:.2} s ({:.1}x real time)",
-            wall_s, report.realtime_factor
-        );
-        println!(
-            "  base start -> end   [{:.3}, {:.3}, {:.3}] -> [{:.3}, {:.3}, {:.3}] m",
-            start.x, start.y, start.z, end.x, end.y, end.z
-        );
-        println!("  base travel (xy)    {:.4} m", report.base_travel_xy_m);
-        println!(
-            "  max base tilt       {:.4} rad ({:.2} deg)",
-            max_tilt,
-            max_tilt.to_degrees()
-        );
-        println!(
-            "  lowest point        {:.4} m (negative: below the ground)",
-            lowest
-        );
-        println!(
-            "  max mount error     {:.5} m, {:.3} deg",
-            mount_m,
-            mount_rad.to_degrees()
-        );
-        println!("  max joint speed     {:.3} rad/s", max_speed);
-        println!(
-            "  arm joints after 1 s {:.3} rad/s mean, {:.3} rad/s max",
-            arm_speeds.mean, arm_speeds.max
-        );
-        println!(
-            "  targets' lead after 1 s {:.4} rad mean, {:.4} rad max",
-            arm_leads.mean, arm_leads.max
-        );
-        println!("  all values finite   {}", finite);
-        println!(
-            "  touching the ground {}",
-            report.ground_contacts_at_end.join(", ")
-        );
-        println!(
-            "  wheel modules off   {:.3} per control step; all down on {:.1} % of the steps",
-            report.wheel_modules_off_ground_mean,
-            100.0 * report.all_wheel_modules_down_share
-        );
     }
-    Ok(())
+    println!(
+        "  wall time           {:.2} s ({:.1}x real time)",
+        report.wall_s, report.realtime_factor
+    );
+    println!(
+        "  base start -> end   [{:.3}, {:.3}, {:.3}] -> [{:.3}, {:.3}, {:.3}] m",
+        start[0], start[1], start[2], end[0], end[1], end[2]
+    );
+    println!("  base travel (xy)    {:.4} m", report.base_travel_xy_m);
+    println!(
+        "  max base tilt       {:.4} rad ({:.2} deg)",
+        report.max_tilt_rad,
+        report.max_tilt_rad.to_degrees()
+    );
+    println!(
+        "  lowest point        {:.4} m (negative: below the ground)",
+        report.lowest_point_m
+    );
+    println!(
+        "  max mount error     {:.5} m, {:.3} deg",
+        report.max_mount_error_m,
+        report.max_mount_error_rad.to_degrees()
+    );
+    println!(
+        "  max joint speed     {:.3} rad/s",
+        report.max_joint_speed_rad_s
+    );
+    println!(
+        "  arm joints after 1 s {:.3} rad/s mean, {:.3} rad/s max",
+        report.arm_joint_speed_after_1s_mean_rad_s, report.arm_joint_speed_after_1s_max_rad_s
+    );
+    println!(
+        "  targets' lead after 1 s {:.4} rad mean, {:.4} rad max",
+        report.arm_target_lead_after_1s_mean_rad, report.arm_target_lead_after_1s_max_rad
+    );
+    println!("  all values finite   {}", report.finite);
+    println!(
+        "  touching the ground {}",
+        report.ground_contacts_at_end.join(", ")
+    );
+    println!(
+        "  wheel modules off   {:.3} per control step; all down on {:.1} % of the steps",
+        report.wheel_modules_off_ground_mean,
+        100.0 * report.all_wheel_modules_down_share
+    );
 }

@@ -1011,6 +1011,45 @@ fn the_example_morphology_stands_and_its_whole_body_task_builds() {
 }
 
 #[test]
+fn robot_says_what_a_new_robot_is_and_what_its_config_should_set() {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let morphology = format!("{root}/examples/caterpillar.toml");
+    let s: serde_json::Value = kumi_json(&["robot", &morphology, "--json"]);
+    assert_eq!(s["robot"], "caterpillar");
+    // Dragon's modules and a second trailing leg with its wheel module.
+    assert_eq!(s["modules"].as_array().unwrap().len(), 6, "{s}");
+    assert_eq!(s["arms"].as_array().unwrap().len(), 3, "{s}");
+    assert!(s["mass_kg"].as_f64().unwrap() > 10.0, "{s}");
+    // Sized by Dragon's config, the one to start from (as examples/caterpillar_whole_body.toml).
+    assert_eq!(
+        (s["observations"].as_u64(), s["actions"].as_u64()),
+        (Some(33), Some(17))
+    );
+    assert!(s["config"].as_str().unwrap().contains("dragon.toml"), "{s}");
+    let standing = &s["standing"];
+    assert_eq!(standing["tilt_limit_rad"].as_f64(), Some(1.0), "{s}");
+    assert!(
+        standing["stands"].is_boolean() && standing["still"].is_boolean(),
+        "{s}"
+    );
+    let advice = s["advice"].to_string();
+    assert!(
+        advice.contains("target_z_m") && advice.contains("tilt_limit_rad"),
+        "{s}"
+    );
+    // A shipped robot has its own config: nothing to advise.
+    let minimal: serde_json::Value = kumi_json(&["robot", "minimal", "--no-standing", "--json"]);
+    assert_eq!(
+        (
+            minimal["observations"].as_u64(),
+            minimal["actions"].as_u64()
+        ),
+        (Some(19), Some(7))
+    );
+    assert!(minimal["standing"].is_null() && minimal["advice"].as_array().unwrap().is_empty());
+}
+
+#[test]
 fn restamp_moves_a_policy_to_its_robot_as_it_is_and_keeps_what_it_was_trained_on() {
     use kumi_terms::contract::{MORPHOLOGY_FINGERPRINT, TRAINED_MORPHOLOGY_FINGERPRINT};
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
