@@ -131,6 +131,7 @@ fn summarise(model: &RobotModel, args: &RobotArgs) -> Result<RobotSummary> {
             skill_on,
             skill: None,
             leg_roll: 0.0,
+            max_lead_rad: None,
             json: true,
             physics: PhysicsArgs {
                 engine: args.engine,

@@ -109,6 +109,12 @@ pub struct SimArgs {
     /// tip). The report says how far each module's tool ends from its goal.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub leg_roll: f64,
+    /// Keep each skill-driven joint's position target within this of its angle [rad]
+    /// (`kumi_model::commands::bound_lead`): what a bound on targets wound up against a load
+    /// would do. Nothing else applies it yet; a skill trained in free space never leads its
+    /// joints by more than about 0.05 rad.
+    #[arg(long)]
+    pub max_lead_rad: Option<f64>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -120,6 +126,8 @@ pub struct SimArgs {
 struct SkillDriver {
     module: String,
     joints: std::ops::Range<usize>,
+    actuators: Vec<kumi_model::Actuator>,
+    max_lead_rad: Option<f64>,
     skill: ArmSkill,
     policy: SkillPolicy,
     kinematics: ToolKinematics,
@@ -148,6 +156,7 @@ impl SkillDriver {
         skill_path: &std::path::Path,
         control_hz: f64,
         leg_roll_rad: f64,
+        max_lead_rad: Option<f64>,
     ) -> Result<Vec<Self>> {
         let all = names.iter().any(|n| n == "all");
         let bytes = std::fs::read(skill_path)
@@ -173,6 +182,8 @@ impl SkillDriver {
             drivers.push(Self {
                 module: m.name.clone(),
                 joints: world.module_range(&m.name)?,
+                actuators: m.position_joints().cloned().collect(),
+                max_lead_rad,
                 skill,
                 policy,
                 kinematics: ToolKinematics::new(model, m).map_err(anyhow::Error::msg)?,
@@ -202,7 +213,21 @@ impl SkillDriver {
         let observation =
             observation::build(&q, &self.at(&qd), &self.at(&targets), &self.goal, &tool_b);
         let action = self.policy.act(&observation)?;
-        world.apply_increments(&self.module, &self.skill.increments(&action))?;
+        let increments = self.skill.increments(&action);
+        match self.max_lead_rad {
+            None => world.apply_increments(&self.module, &increments)?,
+            Some(bound) => {
+                let actuators: Vec<&kumi_model::Actuator> = self.actuators.iter().collect();
+                let next = kumi_model::commands::apply_increments(
+                    &self.at(&targets),
+                    &increments,
+                    &actuators,
+                )
+                .context("the skill's increments")?;
+                let next = kumi_model::commands::bound_lead(&next, &q, bound);
+                world.set_position_targets(&self.module, &next)?;
+            }
+        }
         Ok(())
     }
 
@@ -255,6 +280,8 @@ pub struct SimReport {
     skill_on: Vec<String>,
     /// Roll asked of the legs on the skill [rad].
     leg_roll_rad: f64,
+    /// The bound on the targets' lead (`--max-lead-rad`; `null`: none).
+    max_lead_rad: Option<f64>,
     /// Each skill-driven module's tool against its goal at the end.
     skill_tracking: Vec<Tracking>,
     control_steps: u64,
@@ -312,6 +339,12 @@ pub fn simulate(args: &SimArgs) -> Result<SimReport> {
             args.leg_roll
         );
     }
+    if args
+        .max_lead_rad
+        .is_some_and(|b| !(b.is_finite() && b > 0.0))
+    {
+        bail!("--max-lead-rad must be a positive angle [rad]");
+    }
     let model = load_model(&args.morphology)?;
     let config = args.physics.config(&model);
     let engine = crate::engine::choose(args.physics.engine, Engine::Rapier)?;
@@ -339,6 +372,7 @@ pub fn simulate(args: &SimArgs) -> Result<SimReport> {
             &skill_path,
             config.control_hz,
             args.leg_roll,
+            args.max_lead_rad,
         )?
     };
     let start = world.base_pose().translation.vector;
@@ -403,6 +437,7 @@ pub fn simulate(args: &SimArgs) -> Result<SimReport> {
         control_hz: config.control_hz,
         skill_on: drivers.iter().map(|d| d.module.clone()).collect(),
         leg_roll_rad: args.leg_roll,
+        max_lead_rad: args.max_lead_rad,
         skill_tracking: drivers.iter().map(|d| d.tracking(world.as_ref())).collect(),
         control_steps: steps,
         wall_s,

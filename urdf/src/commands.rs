@@ -160,9 +160,29 @@ pub fn apply_increments(
     )
 }
 
+/// Targets kept within `max_lead_rad` of the measured angles `q` [rad]: a bound on how far a
+/// command may wind up ahead of a joint that cannot follow (a leg whose tip the ground holds).
+/// Free motion never meets it when the bound is above what a joint at its velocity limit
+/// needs (damping / stiffness x speed). Lengths must match.
+pub fn bound_lead(targets: &[f64], q: &[f64], max_lead_rad: f64) -> Vec<f64> {
+    debug_assert_eq!(targets.len(), q.len());
+    targets
+        .iter()
+        .zip(q)
+        .map(|(t, q)| t.clamp(q - max_lead_rad, q + max_lead_rad))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_bounded_lead_keeps_targets_near_the_joints() {
+        let q = [0.0, 1.0, -1.0];
+        assert_eq!(bound_lead(&[0.1, 1.5, -1.05], &q, 0.2), [0.1, 1.2, -1.05]);
+        assert_eq!(bound_lead(&[-0.5, 1.0, -2.0], &q, 0.2), [-0.2, 1.0, -1.2]);
+    }
 
     #[test]
     fn a_commanded_rate_holds_for_the_period_it_was_spread_over() {
