@@ -169,8 +169,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         hardware: None,
         profile: None,
     };
-    launch::check_policy(&model, &launch_args, None)?;
-    let policy = launch::whole_body_policy(&model.name, &launch_args);
+    let policy = launch::check_policy(&model, &launch_args, None)?;
     let (range, tilt_limit_rad, seconds) = match crate::whole_body::trained_task(&policy, &robot)? {
         Some((task, from)) => {
             eprintln!(

@@ -386,20 +386,20 @@ pub fn whole_body_policy(robot: &str, args: &LaunchArgs) -> PathBuf {
         .unwrap_or_else(|| Variant::Hierarchical.default_policy(robot))
 }
 
-/// Fails, saying how to get one, when the robot has no whole-body policy to launch with.
-/// `otherwise` is what else the command can do without one (`--no-whole-body` for a launch).
+/// The whole-body policy to launch with ([`whole_body_policy`]), or an error saying how to get
+/// one. `otherwise` is what else the command can do without one (`--no-whole-body` for a
+/// launch).
 pub fn check_policy(
     model: &kumi_model::RobotModel,
     args: &LaunchArgs,
     otherwise: Option<&str>,
-) -> Result<()> {
+) -> Result<PathBuf> {
     Variant::Hierarchical.require_policy(
         &model.name,
         &args.morphology,
         args.policy.as_deref(),
         otherwise,
-    )?;
-    Ok(())
+    )
 }
 
 pub fn run(args: LaunchArgs) -> Result<()> {

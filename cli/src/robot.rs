@@ -11,6 +11,7 @@ use clap::Args;
 use kumi_model::{RobotModel, Role};
 use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::JOINTS;
+use kumi_policies::skill::ArmSkill;
 use kumi_worlds::Engine;
 use serde::Serialize;
 
@@ -219,7 +220,7 @@ fn arm_summaries(model: &RobotModel) -> Result<Vec<ArmSummary>> {
     model
         .modules
         .iter()
-        .filter(|m| m.ee_link.is_some() && m.position_joints().count() == JOINTS)
+        .filter(|m| ArmSkill::new(m, sim.control_hz).is_ok())
         .map(|m| {
             let home: [f64; JOINTS] =
                 std::array::from_fn(|j| m.home.get(j).copied().unwrap_or(0.0));

@@ -132,7 +132,7 @@ pub fn trained_task(path: &std::path::Path, robot: &str) -> Result<Option<(Train
             .map(|c| {
                 (
                     c.task.trained_task(),
-                    format!("the shipped config train/configs/whole_body/{robot}.toml"),
+                    format!("the shipped config of `{robot}`"),
                 )
             }),
     )

@@ -63,7 +63,7 @@ pub const OBSERVATION_NAMES: [&str; OBSERVATION_DIM] = [
     "tool_to_goal_z", // goal position less tool position, arm base frame [m]
     "tool_to_goal_rx",
     "tool_to_goal_ry",
-    "tool_to_goal_rz", // rotation from the tool's orientation to the goal's, a rotation vector in the arm base frame [rad]
+    "tool_to_goal_rz", // tool to goal rotation, a rotation vector in the base frame [rad]
 ];
 
 /// A reaching goal for the tool frame, in the arm base frame (`_b`).
