@@ -27,6 +27,11 @@ pub struct BridgeArgs {
     /// holds.
     #[arg(long, default_value_t = 0.5)]
     pub lockstep_timeout: f64,
+    /// Lockstep: the first step waits for a command from each of these modules, however long
+    /// it takes (a launch names the modules whose nodes it started, so that a run never starts
+    /// without a node that discovery has not found yet).
+    #[arg(long, value_delimiter = ',', value_name = "MODULE,...")]
+    pub wait_for: Vec<String>,
     /// Real-time mode: simulated seconds per wall-clock second.
     #[arg(long, default_value_t = 1.0)]
     pub realtime_factor: f64,
@@ -40,6 +45,9 @@ pub struct BridgeArgs {
 
 pub fn run(args: BridgeArgs) -> Result<()> {
     let model = load_model(&args.morphology)?;
+    if !args.lockstep && !args.wait_for.is_empty() {
+        bail!("--wait-for applies to --lockstep only");
+    }
     if !(args.lockstep_timeout.is_finite() && args.lockstep_timeout > 0.0) {
         bail!("--lockstep-timeout must be a positive number of seconds");
     }
@@ -62,6 +70,7 @@ pub fn run(args: BridgeArgs) -> Result<()> {
         },
         stale_after_s: args.stale_after,
         duplicate_check: Duration::from_millis(1500),
+        first_step_waits_for: args.wait_for,
     };
     let shutdown = Arc::new(AtomicBool::new(false));
     let flag = shutdown.clone();

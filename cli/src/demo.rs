@@ -4,6 +4,7 @@
 //! each target's final tool error and time, with a top-down plot (SVG) and a CSV of the run.
 //! Needs no ROS install and no native library (tract, rapier).
 
+use std::collections::BTreeMap;
 use std::f64::consts::PI;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -12,6 +13,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use kumi_msgs::builtin_interfaces::Time;
+use kumi_msgs::diagnostic_msgs::DiagnosticArray;
 use kumi_msgs::geometry_msgs::PoseStamped;
 use kumi_msgs::nav_msgs::Odometry;
 use kumi_msgs::std_msgs::Header;
@@ -57,7 +60,7 @@ pub struct DemoArgs {
     #[arg(long)]
     pub engine: Option<String>,
     /// One JSON object on stdout: {robot, targets: [{target: [x, y, z, yaw], position_error_m,
-    /// yaw_error_rad, seconds, tipped_over_after_s}], skipped, plot, csv}.
+    /// yaw_error_rad, seconds, tipped_over_after_s}], skipped, inexact_ticks, plot, csv}.
     #[arg(long)]
     pub json: bool,
 }
@@ -95,13 +98,13 @@ fn place(offset: &Target, base_xy: [f64; 2]) -> Target {
     }
 }
 
-/// One sample of the run, as the CSV has it.
+/// One sample of the run, as the CSV has it: one control tick.
 struct Sample {
     t_s: f64,
     target: usize,
     /// Base x, y [m] and yaw [rad].
     base: [f64; 3],
-    /// Base tilt [rad] (`kumi_terms::termination::tilt`).
+    /// Base tilt [rad] at the same tick (`kumi_terms::termination::tilt`).
     tilt_rad: f64,
     tool: Isometry3<f64>,
 }
@@ -110,7 +113,6 @@ struct Sample {
 struct TippedOver {
     target: usize,
     after_s: f64,
-    tilt_rad: f64,
 }
 
 /// What one target came to.
@@ -131,18 +133,23 @@ struct Report {
     targets: Vec<Outcome>,
     /// Targets not sent because the robot had tipped over.
     skipped: usize,
+    /// Ticks that did not wait for every node (the nodes' `lockstep_timeouts`, `late_goals`
+    /// and `unsynchronised_ticks`): 0 when the run repeats exactly.
+    inexact_ticks: u64,
     plot: String,
     csv: String,
 }
 
-fn target_msg(target: &Target, frame: &str) -> PoseStamped {
+/// A target as `/<robot>/goal_pose` takes it; stamped with the simulated time [s] it starts
+/// at, or zero (at once).
+fn target_msg(target: &Target, frame: &str, starts_at_s: Option<f64>) -> PoseStamped {
     let pose = Isometry3::from_parts(
         target.position_w.into(),
         UnitQuaternion::from_axis_angle(&Vector3::z_axis(), target.yaw),
     );
     PoseStamped {
         header: Header {
-            stamp: Default::default(),
+            stamp: starts_at_s.map_or_else(Default::default, Time::from_seconds),
             frame_id: frame.to_string(),
         },
         pose: geometry::pose(&pose),
@@ -232,21 +239,82 @@ pub fn run(args: DemoArgs) -> Result<()> {
         &mut launched,
     );
     launched.stop(Duration::from_secs(5));
-    let (placed, samples, tipped) = result?;
-    report(
-        &robot,
-        &placed,
-        targets.len(),
-        &samples,
-        tipped.as_ref(),
-        &out,
-        args.json,
-    )
+    report(&robot, &result?, targets.len(), &out, args.json)
+}
+
+/// Control ticks per second of simulated time: every stamp is a whole tick.
+const TICKS_PER_S: f64 = kumi_model::commands::CONTROL_HZ;
+
+fn tick_of(t_s: f64) -> i64 {
+    (t_s * TICKS_PER_S).round() as i64
+}
+
+/// When each target of a run is placed, sent for, and judged, in control ticks: target `i`
+/// drives the ticks `(start + i n, start + (i + 1) n]` and is placed around where the base
+/// stands `lead` ticks before its first (the first target: where the robot stands at `start`).
+/// Pure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Schedule {
+    /// The tick at which the first target arrives (simulated time stands still until then).
+    start: i64,
+    /// Ticks per target.
+    n: i64,
+    /// Ticks between a later target's placement and its start: time for it to arrive before it
+    /// is due, on however loaded a machine.
+    lead: i64,
+}
+
+impl Schedule {
+    fn new(start: i64, seconds: f64) -> Self {
+        let n = tick_of(seconds).max(2);
+        Self {
+            start,
+            n,
+            lead: (n / 2).min(TICKS_PER_S as i64),
+        }
+    }
+
+    /// The tick whose state target `i`'s first action is decided on.
+    fn begin(&self, i: usize) -> i64 {
+        self.start + i as i64 * self.n
+    }
+
+    /// The tick of the base pose target `i` is placed around.
+    fn placed_at(&self, i: usize) -> i64 {
+        if i == 0 {
+            self.start
+        } else {
+            self.begin(i) - self.lead
+        }
+    }
+
+    /// Seconds from target `i`'s start to `tick`.
+    fn after_s(&self, i: usize, tick: i64) -> f64 {
+        (tick - self.begin(i)) as f64 / TICKS_PER_S
+    }
+
+    /// The target whose actions led to the state of `tick` (`None`: before the first).
+    fn target_of(&self, tick: i64) -> Option<usize> {
+        (tick > self.start).then(|| ((tick - self.start - 1) / self.n) as usize)
+    }
 }
 
 /// Sends the targets one by one, each placed around where the base stands then, and records
-/// the run; returns the targets as sent. A robot that tilts past `tilt_limit_rad` has tipped
-/// over (the whole-body node stops driving it): the remaining targets are not sent.
+/// the run; returns the targets as sent. In lockstep the run is repeatable: a later target is
+/// stamped with the simulated time it starts at (the whole-body node waits for it) and placed
+/// around the base as it stood a fixed time before, and every sample pairs the tool pose and the
+/// odometry of the same tick. A robot that tilts past `tilt_limit_rad` has tipped over (the
+/// whole-body node stops driving it): the remaining targets are not sent.
+/// A run as [`drive`] recorded it.
+struct Driven {
+    /// The targets as sent.
+    placed: Vec<Target>,
+    samples: Vec<Sample>,
+    tipped: Option<TippedOver>,
+    /// Ticks that did not wait for every node ([`Exactness`]).
+    inexact_ticks: u64,
+}
+
 #[allow(clippy::too_many_arguments)]
 fn drive(
     model: &kumi_model::RobotModel,
@@ -257,13 +325,16 @@ fn drive(
     tilt_limit_rad: Option<f64>,
     shutdown: &AtomicBool,
     launched: &mut Launch,
-) -> Result<(Vec<Target>, Vec<Sample>, Option<TippedOver>)> {
+) -> Result<Driven> {
     let mut node = RosNode::new(&format!("/{robot}"), "demo", domain)?;
     let publisher =
         node.publisher::<PoseStamped>(&topics::robot_goal_pose(robot), qos::default())?;
     let tool =
         node.strict_subscription::<PoseStamped>(&topics::tool_pose(robot), qos::default())?;
     let odom = node.strict_subscription::<Odometry>(&topics::odom(robot), qos::default())?;
+    let diagnostics =
+        node.strict_subscription::<DiagnosticArray>(topics::DIAGNOSTICS, qos::default())?;
+    let mut exactness = Exactness::default();
     // Every node up: the whole-body node's and each arm node's outputs are discovered.
     let mut outputs = vec![topics::tool_pose(robot)];
     for m in model.modules.iter().filter(|m| m.ee_link.is_some()) {
@@ -281,118 +352,234 @@ fn drive(
     }
     std::thread::sleep(Duration::from_secs(1));
     let frame = topics::odom_frame(robot);
-    let mut samples = Vec::new();
-    let mut base = [0.0; 3];
-    // The base's latest tilt [rad], and the largest since the last sample: a brief tip the
-    // node caught counts.
-    let (mut tilt_now, mut tilt_rad) = (0.0_f64, 0.0_f64);
-    let mut t_end = 0.0_f64;
-    let mut tipped = None;
+    let mut odometry = BTreeMap::new();
+    read_odometry(&odom, &mut odometry);
+    let schedule = Schedule::new(odometry.keys().last().copied().unwrap_or(0), seconds);
+    let end = schedule.begin(targets.len());
+    // The tool pose of each tick, by tick; odometry is paired with it at the end (the two
+    // topics arrive in either order).
+    let mut tool_poses: BTreeMap<i64, Isometry3<f64>> = BTreeMap::new();
+    let mut placed: Vec<Target> = Vec::new();
+    let mut sent_at = None::<Instant>;
+    // The tick at which the base tilted past the limit.
+    let mut tipped_at: Option<i64> = None;
     let mut last_sample_at = Instant::now();
-    let mut placed = Vec::new();
-    for (i, offset) in targets.iter().enumerate() {
-        let t_start = t_end;
-        let mut sent_at = None::<Instant>;
-        let mut moved = false;
-        read_odometry(&odom, &mut base, &mut tilt_now, &mut tilt_rad);
-        let target = &place(offset, [base[0], base[1]]);
-        placed.push(*target);
-        loop {
-            if shutdown.load(Ordering::Relaxed) {
-                bail!("interrupted");
+    let mut late = std::collections::BTreeSet::new();
+    loop {
+        if shutdown.load(Ordering::Relaxed) {
+            bail!("interrupted");
+        }
+        if let Some((name, status)) = launched.exited() {
+            bail!("node `{name}` exited ({status}); see the nodes' log");
+        }
+        read_odometry(&odom, &mut odometry);
+        exactness.read(&diagnostics, robot);
+        if let (None, Some(limit)) = (tipped_at, tilt_limit_rad) {
+            tipped_at = odometry
+                .range(schedule.start + 1..=end)
+                .find(|(_, b)| b.tilt_rad > limit)
+                .map(|(k, _)| *k);
+        }
+        // The next target, once the base pose it is placed around is known.
+        let next = placed.len();
+        if next < targets.len() && tipped_at.is_none() {
+            if let Some(base) = odometry
+                .range(schedule.placed_at(next)..)
+                .next()
+                .map(|(_, b)| b)
+            {
+                placed.push(place(&targets[next], [base.xy_yaw[0], base.xy_yaw[1]]));
+                sent_at = None;
             }
-            if let Some((name, status)) = launched.exited() {
-                bail!("node `{name}` exited ({status}); see the nodes' log");
-            }
-            // Sent until the robot answers (a target sent before the whole-body node's
-            // subscription is matched would be lost); repeating it changes nothing.
-            if !moved && sent_at.is_none_or(|s| s.elapsed() > Duration::from_millis(500)) {
-                let _ = publisher.publish(target_msg(target, &frame));
+        }
+        // The latest target is sent until its ticks begin (a target sent before the
+        // whole-body node's subscription is matched would be lost); repeating it changes
+        // nothing. The first applies at once, a later one at its stamp.
+        let latest = tool_poses.keys().last().copied().unwrap_or(schedule.start);
+        if let Some(target) = placed.last() {
+            let i = placed.len() - 1;
+            let started = schedule.target_of(latest).is_some_and(|t| t >= i);
+            if !started && sent_at.is_none_or(|s| s.elapsed() > Duration::from_millis(500)) {
+                let stamp = (i > 0).then(|| schedule.begin(i) as f64 / TICKS_PER_S);
+                let _ = publisher.publish(target_msg(target, &frame, stamp));
                 sent_at = Some(Instant::now());
             }
-            read_odometry(&odom, &mut base, &mut tilt_now, &mut tilt_rad);
-            let mut done = false;
-            while let Some(msg) = tool.take() {
-                let Ok((m, _)) = msg else { continue };
-                let Ok(pose) = geometry::isometry(&m.pose) else {
-                    continue;
-                };
-                let t = m.header.stamp.seconds();
-                if t <= t_start {
-                    continue;
-                }
-                moved = true;
-                t_end = t_end.max(t);
-                samples.push(Sample {
-                    t_s: t,
-                    target: i,
-                    base,
-                    tilt_rad,
-                    tool: pose,
-                });
-                last_sample_at = Instant::now();
-                done |= t >= t_start + seconds;
-                if tipped.is_none() && tilt_limit_rad.is_some_and(|limit| tilt_rad > limit) {
-                    tipped = Some(TippedOver {
-                        target: i,
-                        after_s: t - t_start,
-                        tilt_rad,
-                    });
-                    done = true;
-                }
-                tilt_rad = tilt_now;
-            }
-            if last_sample_at.elapsed() > Duration::from_secs(60) {
-                bail!("no tool pose from the whole-body node for 60 s (target {}); see the nodes' log", i + 1);
-            }
-            if done {
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(1));
         }
-        let last = samples.last().expect("samples of this target");
-        let (p, y) = target_errors(&last.tool, target);
-        eprintln!(
-            "target {}: ({:.2}, {:.2}, {:.2}) m, yaw {:.2} rad -> tool {p:.3} m and {y:.2} rad away after {:.1} s",
-            i + 1,
-            target.position_w.x,
-            target.position_w.y,
-            target.position_w.z,
-            target.yaw,
-            last.t_s - t_start
-        );
-        if let Some(t) = &tipped {
-            eprintln!(
-                "target {}: the robot tipped over after {:.1} s (tilt {:.3} rad, past the policy's {:.3}); the whole-body node stopped driving it, and {} more target(s) are not sent",
-                i + 1,
-                t.after_s,
-                t.tilt_rad,
-                tilt_limit_rad.unwrap_or(f64::NAN),
-                targets.len() - i - 1
-            );
+        while let Some(msg) = tool.take() {
+            let Ok((m, _)) = msg else { continue };
+            let Ok(pose) = geometry::isometry(&m.pose) else {
+                continue;
+            };
+            let tick = tick_of(m.header.stamp.seconds());
+            let Some(i) = schedule.target_of(tick).filter(|_| tick <= end) else {
+                continue;
+            };
+            if i >= placed.len() {
+                if late.insert(i) {
+                    eprintln!(
+                        "target {}: not sent before its time (this process fell behind); it starts late, and this run will not repeat exactly",
+                        i + 1
+                    );
+                }
+                continue;
+            }
+            tool_poses.insert(tick, pose);
+            last_sample_at = Instant::now();
+            if tick == schedule.begin(i + 1) {
+                print_outcome(i, &placed[i], &pose, schedule.after_s(i, tick));
+            }
+        }
+        let last = tipped_at.unwrap_or(end);
+        if tool_poses.range(last..).next().is_some() {
             break;
         }
+        if last_sample_at.elapsed() > Duration::from_secs(60) {
+            bail!(
+                "no tool pose from the whole-body node for 60 s (target {}); see the nodes' log",
+                placed.len()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(1));
     }
-    Ok((placed, samples, tipped))
+    // Every sample's odometry (sent before the tool pose of its tick, but maybe not yet here),
+    // and every node's counters once more (each node reports once a second).
+    let last = tipped_at.unwrap_or(end);
+    let waited = Instant::now();
+    while waited.elapsed() < Duration::from_millis(1200)
+        || odometry.range(last..).next().is_none() && waited.elapsed() < Duration::from_secs(5)
+    {
+        std::thread::sleep(Duration::from_millis(1));
+        read_odometry(&odom, &mut odometry);
+        exactness.read(&diagnostics, robot);
+    }
+    exactness.tell();
+    let samples: Vec<Sample> = tool_poses
+        .range(..=last)
+        .filter_map(|(&tick, pose)| {
+            let i = schedule.target_of(tick)?;
+            let base = odometry
+                .range(..=tick)
+                .next_back()
+                .map_or_else(BaseSample::default, |(_, b)| *b);
+            Some(Sample {
+                t_s: tick as f64 / TICKS_PER_S,
+                target: i,
+                base: base.xy_yaw,
+                tilt_rad: base.tilt_rad,
+                tool: *pose,
+            })
+        })
+        .collect();
+    let tipped = tipped_at.and_then(|tick| {
+        let i = schedule.target_of(tick)?;
+        let after_s = schedule.after_s(i, tick);
+        if let Some(s) = samples.last() {
+            print_outcome(i, &placed[i], &s.tool, after_s);
+        }
+        eprintln!(
+            "target {}: the robot tipped over after {after_s:.1} s (tilt {:.3} rad, past the policy's {:.3}); the whole-body node stopped driving it, and {} more target(s) are not sent",
+            i + 1,
+            odometry[&tick].tilt_rad,
+            tilt_limit_rad.unwrap_or(f64::NAN),
+            targets.len() - i - 1
+        );
+        placed.truncate(i + 1);
+        Some(TippedOver { target: i, after_s })
+    });
+    Ok(Driven {
+        placed,
+        samples,
+        tipped,
+        inexact_ticks: exactness.total(),
+    })
 }
 
-/// Takes the odometry waiting: the base's x, y and yaw, its tilt now and the largest since the
-/// last sample.
+/// What a run did that breaks its exact repetition, from the nodes' `/diagnostics` counters:
+/// steps the bridge ran without a node's command (`lockstep_timeouts`), ticks an arm node acted
+/// without its goal (`late_goals`), and ticks the whole-body node acted without every module's
+/// state (`unsynchronised_ticks`). All zero: the seeded run repeats exactly.
+#[derive(Debug, Default)]
+struct Exactness {
+    /// Per node (status name): its latest value of each counter.
+    counters: BTreeMap<String, BTreeMap<&'static str, u64>>,
+}
+
+const INEXACT_COUNTERS: [&str; 3] = ["lockstep_timeouts", "late_goals", "unsynchronised_ticks"];
+
+impl Exactness {
+    fn read(&mut self, sub: &kumi_ros::StrictSubscription<DiagnosticArray>, robot: &str) {
+        while let Some(msg) = sub.take() {
+            let Ok((array, _)) = msg else { continue };
+            for status in array.status {
+                let id = &status.hardware_id;
+                if id != robot && !id.starts_with(&format!("{robot}/")) {
+                    continue;
+                }
+                let mine = self.counters.entry(status.name.clone()).or_default();
+                for kv in &status.values {
+                    if let Some(key) = INEXACT_COUNTERS.iter().find(|k| **k == kv.key) {
+                        mine.insert(key, kv.value.parse().unwrap_or(0));
+                    }
+                }
+            }
+        }
+    }
+
+    fn total(&self) -> u64 {
+        self.counters.values().flat_map(|c| c.values()).sum()
+    }
+
+    fn tell(&self) {
+        if self.total() == 0 {
+            return;
+        }
+        for (node, counters) in &self.counters {
+            for (key, n) in counters.iter().filter(|(_, n)| **n > 0) {
+                eprintln!("demo: {node}: {key} {n}");
+            }
+        }
+        eprintln!("demo: some ticks did not wait for every node (above; a message came later than the lockstep timeouts allow, on a loaded machine): this run will not repeat exactly");
+    }
+}
+
+fn print_outcome(i: usize, target: &Target, tool: &Isometry3<f64>, after_s: f64) {
+    let (p, y) = target_errors(tool, target);
+    eprintln!(
+        "target {}: ({:.2}, {:.2}, {:.2}) m, yaw {:.2} rad -> tool {p:.3} m and {y:.2} rad away after {after_s:.1} s",
+        i + 1,
+        target.position_w.x,
+        target.position_w.y,
+        target.position_w.z,
+        target.yaw,
+    );
+}
+
+/// The base as one odometry message has it: x, y [m] and yaw [rad] in `<robot>/odom`, and its
+/// tilt [rad].
+#[derive(Debug, Clone, Copy, Default)]
+struct BaseSample {
+    xy_yaw: [f64; 3],
+    tilt_rad: f64,
+}
+
+/// Takes the odometry waiting, by tick.
 fn read_odometry(
     odom: &kumi_ros::StrictSubscription<Odometry>,
-    base: &mut [f64; 3],
-    tilt_now: &mut f64,
-    tilt_rad: &mut f64,
+    odometry: &mut BTreeMap<i64, BaseSample>,
 ) {
     while let Some(msg) = odom.take() {
         if let Ok((m, _)) = msg {
-            let p = m.pose.pose.position;
-            let rotation = geometry::isometry(&m.pose.pose)
-                .ok()
-                .map(|iso| iso.rotation);
-            *base = [p.x, p.y, rotation.map_or(0.0, |r| tool_yaw(&r))];
-            *tilt_now = rotation.map_or(0.0, |r| tilt(&r));
-            *tilt_rad = tilt_rad.max(*tilt_now);
+            let Ok(pose) = geometry::isometry(&m.pose.pose) else {
+                continue;
+            };
+            let p = pose.translation.vector;
+            odometry.insert(
+                tick_of(m.header.stamp.seconds()),
+                BaseSample {
+                    xy_yaw: [p.x, p.y, tool_yaw(&pose.rotation)],
+                    tilt_rad: tilt(&pose.rotation),
+                },
+            );
         }
     }
 }
@@ -400,13 +587,12 @@ fn read_odometry(
 /// Writes the CSV and the plot; prints the table (or the JSON object).
 fn report(
     robot: &str,
-    targets: &[Target],
+    run: &Driven,
     drawn: usize,
-    samples: &[Sample],
-    tipped: Option<&TippedOver>,
     out: &std::path::Path,
     json: bool,
 ) -> Result<()> {
+    let (targets, samples, tipped) = (&run.placed, &run.samples, run.tipped.as_ref());
     let csv_path = out.join("run.csv");
     let mut csv = String::from(
         "t_s,target,target_x_m,target_y_m,target_z_m,target_yaw_rad,base_x_m,base_y_m,base_yaw_rad,base_tilt_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,position_error_m,yaw_error_rad\n",
@@ -414,7 +600,8 @@ fn report(
     let mut outcomes = Vec::new();
     for (i, target) in targets.iter().enumerate() {
         let mine: Vec<&Sample> = samples.iter().filter(|s| s.target == i).collect();
-        let start = mine.first().map_or(0.0, |s| s.t_s);
+        // The target's start: one tick before its first sample.
+        let start = mine.first().map_or(0.0, |s| s.t_s - 1.0 / TICKS_PER_S);
         let mut reached = None;
         for s in &mine {
             let (p, y) = target_errors(&s.tool, target);
@@ -492,6 +679,7 @@ fn report(
         robot: robot.to_string(),
         targets: outcomes,
         skipped: drawn - targets.len(),
+        inexact_ticks: run.inexact_ticks,
         plot: svg_path.display().to_string(),
         csv: csv_path.display().to_string(),
     };
@@ -545,6 +733,23 @@ mod tests {
         let b = draw_targets(20, 4, &range);
         assert_eq!(a[7].position_w, b[7].position_w);
         assert_ne!(draw_targets(1, 5, &range)[0].position_w, a[0].position_w);
+    }
+
+    #[test]
+    fn each_target_has_its_ticks_and_is_placed_before_them() {
+        let s = Schedule::new(0, 12.0);
+        assert_eq!((s.n, s.lead), (360, 30));
+        assert_eq!((s.begin(0), s.begin(1), s.begin(3)), (0, 360, 1080));
+        assert_eq!((s.placed_at(0), s.placed_at(1)), (0, 330));
+        // The state at tick 0 is the start, before the first target's first action; the state
+        // at a target's first tick is the previous target's last.
+        assert_eq!(s.target_of(0), None);
+        assert_eq!(s.target_of(1), Some(0));
+        assert_eq!(s.target_of(360), Some(0));
+        assert_eq!(s.target_of(361), Some(1));
+        let short = Schedule::new(5, 0.01);
+        assert_eq!((short.n, short.lead), (2, 1), "at least two ticks a target");
+        assert_eq!(short.target_of(7), Some(0));
     }
 
     #[test]

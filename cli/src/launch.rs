@@ -92,15 +92,21 @@ pub struct Planned {
 }
 
 /// How long an arm node waits for the goal of the current tick [ms] (`kumi arm
-/// --goal-sync-ms`): in lockstep long enough for any tick on a loaded machine, but under the
-/// bridge's 0.5 s lockstep timeout; in real time a third of a control period.
+/// --goal-sync-ms`): in lockstep long enough for a tick on a heavily loaded machine, but under
+/// the bridge's [`LOCKSTEP_TIMEOUT_S`]; in real time a third of a control period.
 fn goal_sync_ms(lockstep: bool) -> &'static str {
     if lockstep {
-        "250"
+        "2500"
     } else {
         "10"
     }
 }
+
+/// The bridge's lockstep timeout in a launch [s] (`kumi sim-bridge --lockstep-timeout`): a
+/// step waits this long for a node that answered the last tick before stepping without it.
+/// Longer than any tick takes on a heavily loaded machine, so that a run repeats exactly; a
+/// node that died costs one such wait (then it is no longer waited for).
+const LOCKSTEP_TIMEOUT_S: &str = "5";
 
 /// The nodes to start for `model`, in start order. Pure.
 pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
@@ -128,10 +134,32 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
         robot.clone(),
     ];
     if args.lockstep {
-        bridge.push(s("--lockstep"));
+        bridge.extend([
+            s("--lockstep"),
+            s("--lockstep-timeout"),
+            s(LOCKSTEP_TIMEOUT_S),
+        ]);
     }
     if let Some(e) = &args.engine {
         bridge.extend([s("--engine"), e.clone()]);
+    }
+    let started_arms: Vec<&str> = arms
+        .iter()
+        .copied()
+        .filter(|a| !args.without.iter().any(|w| w == a))
+        .collect();
+    if args.lockstep && !args.no_whole_body {
+        // The first step waits for every node started here: the arm nodes, and the
+        // whole-body node through the wheels it drives.
+        let wheels = model
+            .modules
+            .iter()
+            .filter(|m| m.velocity_joints().count() > 0)
+            .map(|m| m.name.as_str());
+        let first: Vec<&str> = started_arms.iter().copied().chain(wheels).collect();
+        if !first.is_empty() {
+            bridge.extend([s("--wait-for"), first.join(",")]);
+        }
     }
     let hardware = args
         .hardware
@@ -143,10 +171,7 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
             args: bridge,
         });
     }
-    for arm in arms
-        .iter()
-        .filter(|a| !args.without.iter().any(|w| w == *a))
-    {
+    for arm in &started_arms {
         let mut a = vec![
             s("arm"),
             s(arm),
@@ -193,6 +218,9 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
         }
         if let Some(t) = args.tilt_limit_rad {
             a.extend([s("--tilt-limit-rad"), t.to_string()]);
+        }
+        if args.lockstep {
+            a.push(s("--lockstep"));
         }
         if let Some(p) = &hardware {
             a.extend([s("--hardware"), p.clone()]);
@@ -477,11 +505,11 @@ mod tests {
         assert_eq!(*names.last().unwrap(), "whole_body");
         assert_eq!(
             shell_line(&nodes[0].args),
-            "kumi sim-bridge tricycle --robot tricycle --lockstep"
+            "kumi sim-bridge tricycle --robot tricycle --lockstep --lockstep-timeout 5 --wait-for arm0,leg0,leg1,leg2,wheel0,wheel1,wheel2"
         );
         assert!(nodes[1].args.ends_with(&[
             "--goal-sync-ms".into(),
-            "250".into(),
+            "2500".into(),
             "--wait-for-first-goal".into()
         ]));
 
@@ -498,6 +526,20 @@ mod tests {
         assert!(fewer
             .iter()
             .all(|n| !n.args.contains(&"--goal-sync-ms".to_string())));
+        let mut alone = without.clone();
+        alone.no_whole_body = false;
+        let bridge = &plan(&model, &alone).unwrap()[0];
+        let waited: Vec<&str> = ["arm0", "leg0", "leg1", "leg2", "wheel0", "wheel1", "wheel2"]
+            .into_iter()
+            .filter(|m| *m != left_out)
+            .collect();
+        assert!(
+            bridge
+                .args
+                .ends_with(&["--wait-for".into(), waited.join(",")]),
+            "a module left out is not waited for: {:?}",
+            bridge.args
+        );
 
         let mut hw = args("tricycle");
         hw.lockstep = false;

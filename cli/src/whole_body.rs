@@ -36,15 +36,20 @@ pub struct WholeBodyArgs {
     /// Inputs older than this [s] make the node hold (wheels stop, arms keep their goals).
     #[arg(long, default_value_t = 0.5)]
     pub stale_after: f64,
+    /// The sim bridge runs in lockstep: simulated time stands still until this node has
+    /// answered, so it waits for every module's joint states of a tick however long that takes
+    /// and never holds for inputs that are old only in wall time (`kumi launch --lockstep`
+    /// gives it).
+    #[arg(long)]
+    pub lockstep: bool,
     /// Targets further than this [m] from the base (horizontally) are refused: the policies are
     /// trained on targets within 3 m of the origin, the robot starting within 0.5 m of it.
     #[arg(long, default_value_t = 4.5)]
     pub max_target_distance: f64,
     /// Base tilt [rad] past which the node stops driving (wheels stop, arms keep their goals)
     /// until a new target: the policy never saw a robot tilted further, its training episodes
-    /// ended there. Default: the shipped robot's training limit
-    /// (`tilt_limit_rad` in train/configs/whole_body/<morphology>.toml); none for another
-    /// morphology unless given.
+    /// ended there. Default: the limit the policy was trained with (its metadata; for a policy
+    /// exported without it, the shipped config's `tilt_limit_rad`).
     #[arg(long, value_name = "RAD")]
     pub tilt_limit_rad: Option<f64>,
     /// On MoonBot hardware: the Motion Stack profile (limb namespaces, joint names, the
@@ -57,6 +62,9 @@ pub struct WholeBodyArgs {
 pub fn run(args: WholeBodyArgs) -> Result<()> {
     if !(args.stale_after.is_finite() && args.stale_after > 0.0) {
         bail!("--stale-after must be a positive number of seconds");
+    }
+    if args.lockstep && args.hardware.is_some() {
+        bail!("--lockstep is for the sim bridge; on hardware time does not stand still");
     }
     if !(args.max_target_distance.is_finite() && args.max_target_distance > 0.0) {
         bail!("--max-target-distance must be a positive number of metres");
@@ -85,6 +93,7 @@ pub fn run(args: WholeBodyArgs) -> Result<()> {
         backend: args.backend,
         domain_id: kumi_ros::domain_id_from_env()?,
         stale_after_s: args.stale_after,
+        lockstep: args.lockstep,
         max_target_distance_m: args.max_target_distance,
         tilt_limit_rad,
         duplicate_check: std::time::Duration::from_millis(1500),

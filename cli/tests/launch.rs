@@ -287,7 +287,7 @@ fn modules_join_by_hand_robots_share_a_domain_duplicates_are_refused_and_a_dead_
             "--morphology",
             "minimal",
             "--goal-sync-ms",
-            "250",
+            "2500",
             "--wait-for-first-goal",
         ],
         domain,
@@ -499,35 +499,7 @@ fn a_launched_minimal_reaches_a_target_in_real_time() {
 #[test]
 fn the_demo_runs_end_to_end_with_its_plot_csv_and_json() {
     let _one = one_at_a_time();
-    let domain = fresh_domain();
-    let dir = std::env::temp_dir().join(format!("kumi-demo-{}", std::process::id()));
-    let (d, out) = (domain.to_string(), dir.display().to_string());
-    let mut demo = KumiProcess::spawn(
-        KUMI,
-        &[],
-        &[
-            "demo",
-            "minimal",
-            "--targets",
-            "2",
-            "--domain",
-            &d,
-            "--out",
-            &out,
-            "--json",
-        ],
-        domain,
-    );
-    let start = std::time::Instant::now();
-    while demo.alive() && start.elapsed() < Duration::from_secs(240) {
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    let log = demo.log();
-    let line = log
-        .lines()
-        .find(|l| l.starts_with("{\"robot\""))
-        .unwrap_or_else(|| panic!("no JSON line: {log}"));
-    let report: serde_json::Value = serde_json::from_str(line).unwrap();
+    let (report, csv, svg) = demo(&["minimal", "--targets", "2"]);
     println!("demo: {report}");
     assert_eq!(report["robot"], "minimal");
     let targets = report["targets"].as_array().unwrap();
@@ -543,17 +515,82 @@ fn the_demo_runs_end_to_end_with_its_plot_csv_and_json() {
         assert!(t["tipped_over_after_s"].is_null(), "{t}");
     }
     assert_eq!(report["skipped"], 0);
-    let svg = std::fs::read_to_string(report["plot"].as_str().unwrap()).unwrap();
     assert!(
         svg.contains("<polyline") && svg.matches("<circle").count() == 2,
         "{svg}"
     );
-    let csv = std::fs::read_to_string(report["csv"].as_str().unwrap()).unwrap();
-    assert!(csv.lines().count() > 2 * 300, "two 12 s targets at 30 Hz");
+    assert_eq!(
+        csv.lines().count(),
+        1 + 2 * 360,
+        "two 12 s targets at 30 Hz"
+    );
     assert!(
         csv.starts_with("t_s,target,") && csv.lines().next().unwrap().contains(",base_tilt_rad,")
     );
+}
+
+/// Runs `kumi demo` with `args` to its end; its JSON report, its CSV and its plot.
+fn demo(args: &[&str]) -> (serde_json::Value, String, String) {
+    let domain = fresh_domain();
+    let dir = std::env::temp_dir().join(format!("kumi-demo-{}-{domain}", std::process::id()));
+    let (d, out) = (domain.to_string(), dir.display().to_string());
+    let mut all = vec!["demo", "--domain", &d, "--out", &out, "--json"];
+    all.extend(args);
+    let mut demo = KumiProcess::spawn(KUMI, &[], &all, domain);
+    let start = std::time::Instant::now();
+    while demo.alive() && start.elapsed() < Duration::from_secs(240) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let log = demo.log();
+    let line = log
+        .lines()
+        .find(|l| l.starts_with("{\"robot\""))
+        .unwrap_or_else(|| panic!("no JSON line: {log}"));
+    let report: serde_json::Value = serde_json::from_str(line).unwrap();
+    let csv = std::fs::read_to_string(report["csv"].as_str().unwrap()).unwrap();
+    let svg = std::fs::read_to_string(report["plot"].as_str().unwrap()).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
+    (report, csv, svg)
+}
+
+#[test]
+fn a_seeded_lockstep_demo_with_several_arm_nodes_repeats_its_csv_exactly() {
+    let _one = one_at_a_time();
+    // Dragon: two arm nodes and the whole-body node driving two wheel modules, each its own
+    // process; two targets, the second sent while the first runs and stamped with its start.
+    let args = ["dragon", "--targets", "2", "--seconds", "3", "--seed", "5"];
+    let (first, csv, _) = demo(&args);
+    let (second, again, _) = demo(&args);
+    println!("demo: {first}");
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    let ticks = if first["skipped"] == 0 {
+        2 * 90
+    } else {
+        rows.len()
+    };
+    assert_eq!(rows.len(), ticks, "one row per control tick");
+    for (k, row) in rows.iter().enumerate() {
+        let t: f64 = row.split(',').next().unwrap().parse().unwrap();
+        assert!((t - (k + 1) as f64 / 30.0).abs() < 1e-3, "row {k} at {t} s");
+    }
+    let switch = rows
+        .iter()
+        .position(|r| r.split(',').nth(1) == Some("2"))
+        .unwrap_or(rows.len());
+    assert!(
+        first["skipped"] != 0 || switch == 90,
+        "the second target drives from tick 91"
+    );
+    for key in ["targets", "skipped"] {
+        assert_eq!(
+            first[key], second[key],
+            "two runs of the same seeded demo: {key}"
+        );
+    }
+    assert!(
+        csv == again,
+        "two runs of the same seeded demo wrote different CSVs"
+    );
 }
 
 #[test]

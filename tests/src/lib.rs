@@ -78,6 +78,7 @@ impl Bridge {
             mode,
             stale_after_s: 0.5,
             duplicate_check: Duration::from_millis(500),
+            first_step_waits_for: Vec::new(),
         };
         let shutdown = Arc::new(AtomicBool::new(false));
         let flag = shutdown.clone();

@@ -24,7 +24,7 @@ use kumi_msgs::std_msgs::{Float64, Header};
 use kumi_ros::motion_stack::MotionStackProfile;
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_runtime::{BackendChoice, ModelFile, RuntimeError, WholeBodyPolicy};
-use kumi_terms::{ActionTerms, GoalBounds, ObservationOptions};
+use kumi_terms::{ActionTerms, GoalBounds, ObservationOptions, Target};
 use nalgebra::Vector3;
 use ros2_client::Publisher;
 use tracing::{debug, info, warn};
@@ -48,6 +48,11 @@ pub struct WholeBodyNodeConfig {
     pub domain_id: u16,
     /// Inputs older than this [s, wall] make the node hold.
     pub stale_after_s: f64,
+    /// The sim bridge runs in lockstep (simulated time stands still until this node answers):
+    /// wait for every module's joint states of a tick however long it takes, and never hold
+    /// for inputs old only in wall time. Otherwise the node waits one control period for them
+    /// and holds on inputs older than `stale_after_s`.
+    pub lockstep: bool,
     /// Targets further than this [m] from the base (horizontally) are refused.
     pub max_target_distance_m: f64,
     /// How long to listen for another whole-body node of the same robot before starting.
@@ -473,6 +478,22 @@ fn take_steering_commands(
     any
 }
 
+/// Makes `t` the target (a publisher repeating the current target changes nothing); whether
+/// it changed.
+fn start_target(controller: &mut WholeBodyController, report: &mut Report, t: Target) -> bool {
+    if controller.target() == Some(t) {
+        return false;
+    }
+    let p = t.position_w;
+    info!(
+        "new target: ({:.2}, {:.2}, {:.2}) m, yaw {:.2} rad",
+        p.x, p.y, p.z, t.yaw
+    );
+    controller.set_target(t);
+    report.target_since_s = None;
+    true
+}
+
 /// Runs the node until `shutdown` is set.
 pub fn run(
     config: WholeBodyNodeConfig,
@@ -516,12 +537,18 @@ pub fn run(
 
     let start = Instant::now();
     let period_s = 1.0 / kumi_model::commands::CONTROL_HZ;
+    let (sync_wait_s, stale_after_s) = if config.lockstep {
+        (f64::INFINITY, f64::INFINITY)
+    } else {
+        (period_s, config.stale_after_s)
+    };
     let mut tick = Tick::new(controller.modules().to_vec());
     let mut report = Report::default();
     let mut report_at = Instant::now();
     let mut log = RateLimited::new(Duration::from_secs(1));
     let mut hold_log = RateLimited::new(Duration::from_secs(2));
     let mut progress_log = RateLimited::new(Duration::from_secs(2));
+    let mut sync_log = RateLimited::new(Duration::from_secs(5));
     let mut last_odom_stamp: Option<Time> = None;
     let mut last_stale_hold_s = f64::NEG_INFINITY;
     let mut base_xy: Option<[f64; 2]> = None;
@@ -529,6 +556,8 @@ pub fn run(
     // The last decided wheel velocities and their tick, sent again when a steering leg's
     // command changes its wheels' following (hardware).
     let mut last_wheels: Option<(Vec<(String, f64)>, Time)> = None;
+    // A target stamped ahead of the robot's clock, and the time [s] it starts at.
+    let mut pending: Option<(Target, f64)> = None;
 
     while !shutdown.load(Ordering::Relaxed) {
         let now_s = start.elapsed().as_secs_f64();
@@ -539,16 +568,20 @@ pub fn run(
                     match target::accept(&msg, &odom_frame, base_xy, config.max_target_distance_m) {
                         Ok(t) => {
                             report.targets_accepted += 1;
-                            // The same target again (a publisher repeating it) changes nothing.
-                            if controller.target() != Some(t) {
-                                let p = t.position_w;
-                                info!(
-                                    "new target: ({:.2}, {:.2}, {:.2}) m, yaw {:.2} rad",
-                                    p.x, p.y, p.z, t.yaw
-                                );
-                                controller.set_target(t);
-                                report.target_since_s = None;
-                                tick.decide_again();
+                            let clock_s = last_odom_stamp.map(|s| s.seconds());
+                            match target::starts_at(msg.header.stamp.seconds(), clock_s) {
+                                Some(at_s) => {
+                                    if pending != Some((t, at_s)) {
+                                        info!("target for {at_s:.3} s of the robot's clock (stamped ahead): waits for that time");
+                                    }
+                                    pending = Some((t, at_s));
+                                }
+                                None => {
+                                    pending = None;
+                                    if start_target(&mut controller, &mut report, t) {
+                                        tick.decide_again();
+                                    }
+                                }
                             }
                         }
                         Err(why) => {
@@ -659,11 +692,11 @@ pub fn run(
         // How long ago the tick's odometry arrived, for the decision latency.
         let odometry_age_s = tick.base_age_s(now_s).unwrap_or(0.0);
         let decided_at = Instant::now();
-        let decision = match tick.due(now_s, period_s, config.stale_after_s) {
+        let decision = match tick.due(now_s, sync_wait_s, stale_after_s) {
             Due::Wait => {
                 // No odometry for too long (or none yet): hold, once per control period.
                 let age_s = tick.base_age_s(now_s);
-                let overdue = age_s.is_none_or(|a| a >= config.stale_after_s);
+                let overdue = age_s.is_none_or(|a| a >= stale_after_s);
                 (overdue && now_s - last_stale_hold_s >= period_s).then(|| {
                     last_stale_hold_s = now_s;
                     let input = "odometry messages".to_string();
@@ -693,6 +726,19 @@ pub fn run(
                     report.synchronous_ticks += 1;
                 } else {
                     report.unsynchronised_ticks += 1;
+                    if sync_log.check(Instant::now()).is_some() {
+                        warn!(
+                            "acting on the tick at {:.3} s without every module's joint states of that tick (waited {:.0} ms; counted in unsynchronised_ticks on /diagnostics)",
+                            snapshot.stamp.seconds(),
+                            sync_wait_s * 1000.0
+                        );
+                    }
+                }
+                if let Some((t, at_s)) = pending {
+                    if target::has_started(snapshot.stamp.seconds(), at_s) {
+                        pending = None;
+                        start_target(&mut controller, &mut report, t);
+                    }
                 }
                 Some((controller.step(&snapshot), snapshot.stamp))
             }

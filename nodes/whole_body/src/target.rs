@@ -50,6 +50,27 @@ pub fn accept(
     })
 }
 
+/// How far ahead [s] of the robot's clock a target's stamp may be for the target to wait for
+/// that time. A stamp further ahead is another clock's (a wall-clock stamp sent to a
+/// simulator): such a target, like one stamped zero or in the past, applies at once.
+pub const SCHEDULE_HORIZON_S: f64 = 60.0;
+
+/// When a target stamped `stamp_s` [s] takes effect, the robot's clock standing at `clock_s`
+/// (the latest state's stamp; `None` before any): at its stamp when that is ahead of the
+/// clock by at most [`SCHEDULE_HORIZON_S`] (`Some`), else at once (`None`). A run that stamps
+/// each target with the time it should start is repeatable in lockstep, whenever the target
+/// is sent.
+pub fn starts_at(stamp_s: f64, clock_s: Option<f64>) -> Option<f64> {
+    let clock_s = clock_s?;
+    (stamp_s > clock_s && stamp_s <= clock_s + SCHEDULE_HORIZON_S).then_some(stamp_s)
+}
+
+/// Whether a state stamped `stamp_s` [s] is at or past a target's start `at_s` [s] (within a
+/// microsecond: stamps are whole nanoseconds).
+pub fn has_started(stamp_s: f64, at_s: f64) -> bool {
+    stamp_s + 1e-6 >= at_s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -80,6 +101,22 @@ mod tests {
         assert_eq!(t.position_w.x, 2.0);
         assert!((t.yaw - 0.7).abs() < 1e-12);
         assert!(accept(&msg("", 2.0, -3.0), "r/odom", Some([0.0, 0.0]), 5.0).is_ok());
+    }
+
+    #[test]
+    fn a_target_stamped_ahead_of_the_clock_waits_for_its_time() {
+        assert_eq!(starts_at(4.0, Some(3.0)), Some(4.0));
+        assert_eq!(starts_at(0.0, Some(3.0)), None, "stamped zero: at once");
+        assert_eq!(starts_at(2.0, Some(3.0)), None, "in the past: at once");
+        assert_eq!(starts_at(3.0, Some(3.0)), None, "now: at once");
+        assert_eq!(starts_at(4.0, None), None, "no clock yet: at once");
+        assert_eq!(
+            starts_at(1.7e9, Some(3.0)),
+            None,
+            "a wall-clock stamp against sim time: at once"
+        );
+        assert!(has_started(4.0, 4.0) && has_started(4.0 - 1e-9, 4.0));
+        assert!(!has_started(4.0 - 1.0 / 30.0, 4.0));
     }
 
     #[test]

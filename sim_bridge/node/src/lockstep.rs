@@ -19,6 +19,9 @@ pub struct Lockstep {
     started: bool,
     /// A step has run.
     stepped: bool,
+    /// Modules whose first command the first step waits for however long it takes (the
+    /// launch knows which nodes it started; discovery may not have found them all yet).
+    required_first: BTreeSet<String>,
 }
 
 impl Lockstep {
@@ -37,9 +40,29 @@ impl Lockstep {
         }
     }
 
+    /// Modules the first step waits for without a timeout, whether or not their publishers
+    /// have been discovered yet.
+    pub fn require_first(&mut self, modules: impl IntoIterator<Item = String>) {
+        self.required_first = modules.into_iter().collect();
+    }
+
     /// The step may run: something was received and everything expected has arrived.
     pub fn ready(&self) -> bool {
-        !self.received.is_empty() && self.expected.is_subset(&self.received)
+        !self.received.is_empty()
+            && self.expected.is_subset(&self.received)
+            && self.first_complete()
+    }
+
+    /// Before the first step: every required module has sent its first command (after it:
+    /// always).
+    fn first_complete(&self) -> bool {
+        self.stepped || self.required_first.is_subset(&self.received)
+    }
+
+    /// A step may run on the timeout: commands have begun and the first step is not waiting
+    /// for a required module.
+    pub fn may_time_out(&self) -> bool {
+        self.started && self.first_complete()
     }
 
     /// After a step: next tick expects the modules that spoke this tick. A module that stayed
@@ -57,7 +80,15 @@ impl Lockstep {
 
     /// Modules the bridge is waiting for.
     pub fn missing(&self) -> Vec<String> {
-        self.expected.difference(&self.received).cloned().collect()
+        let required = (!self.stepped).then_some(&self.required_first);
+        self.expected
+            .iter()
+            .chain(required.into_iter().flatten())
+            .filter(|m| !self.received.contains(*m))
+            .cloned()
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .collect()
     }
 }
 
@@ -109,5 +140,32 @@ mod tests {
         l.expect_first(["arm0".to_string()]);
         l.received("arm0");
         assert!(!l.ready(), "after the first step only who spoke counts");
+    }
+
+    #[test]
+    fn the_first_step_waits_without_timeout_for_every_required_module() {
+        let mut l = Lockstep::default();
+        l.require_first(["arm0".to_string(), "leg0".to_string()]);
+        // leg0's publisher is not discovered yet: only arm0 is expected from discovery.
+        l.expect_first(["arm0".to_string()]);
+        l.received("arm0");
+        assert!(
+            !l.ready(),
+            "leg0's node was launched: its first command is awaited"
+        );
+        assert!(!l.may_time_out(), "however long it takes");
+        assert_eq!(l.missing(), vec!["leg0".to_string()]);
+        l.received("leg0");
+        assert!(l.ready() && l.may_time_out());
+        l.stepped();
+        l.received("arm0");
+        assert!(!l.ready(), "then who spoke last tick is awaited, as always");
+        assert!(l.may_time_out(), "with the timeout");
+        l.stepped();
+        l.stepped();
+        assert!(
+            l.missing().is_empty(),
+            "the requirement was for the first step only"
+        );
     }
 }

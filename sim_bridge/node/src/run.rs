@@ -51,6 +51,9 @@ pub struct BridgeConfig {
     pub stale_after_s: f64,
     /// How long to listen for another bridge of the same robot before starting.
     pub duplicate_check: Duration,
+    /// Lockstep: modules whose first command the first step waits for, however long it takes
+    /// (besides those whose command topics have a publisher when commands begin).
+    pub first_step_waits_for: Vec<String>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -140,6 +143,21 @@ fn check_config(config: &BridgeConfig) -> Result<(), BridgeError> {
             "robot name `{}` must be a valid ROS name: letters, digits and `_`, not starting with a digit",
             config.robot
         )));
+    }
+    for module in &config.first_step_waits_for {
+        if config.model.module(module).is_none() {
+            return Err(BridgeError::BadConfig(format!(
+                "--wait-for {module}: robot `{}` has no module `{module}` (its modules: {})",
+                config.model.name,
+                config
+                    .model
+                    .modules
+                    .iter()
+                    .map(|m| m.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
     }
     Ok(())
 }
@@ -425,6 +443,8 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         world.config().control_hz,
     );
     let mut lockstep = Lockstep::default();
+    lockstep.require_first(config.first_step_waits_for.iter().cloned());
+    let mut waiting_log = RateLimited::new(Duration::from_secs(5));
     let mut counters = Counters::default();
     let mut malformed = 0_u64;
     let mut reject_log = RateLimited::new(Duration::from_secs(1));
@@ -474,6 +494,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
                 };
                 match result {
                     Ok(update) => {
+                        tracing::debug!("step {steps}: {update:?}");
                         counters.clamped +=
                             u64::from(apply(world.as_mut(), &mut commands, &update)?);
                         lockstep.received(&inputs.name);
@@ -500,11 +521,17 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             Mode::RealTime { .. } => Instant::now() >= next_tick,
             Mode::Lockstep { timeout } => {
                 let timed_out = last_step_at.elapsed() >= timeout;
-                if timed_out && !lockstep.active() {
+                if timed_out && !lockstep.may_time_out() {
                     publish_state(world.as_ref(), steps, &accel_w);
                     last_step_at = Instant::now();
+                    if lockstep.active() && waiting_log.check(Instant::now()).is_some() {
+                        warn!(
+                            "lockstep: the first step waits for the first command from {}",
+                            lockstep.missing().join(", ")
+                        );
+                    }
                 }
-                lockstep.ready() || (timed_out && lockstep.active())
+                lockstep.ready() || (timed_out && lockstep.may_time_out())
             }
         };
         if due {
@@ -750,7 +777,21 @@ mod tests {
             mode: Mode::RealTime { factor: 1.0 },
             stale_after_s: 0.5,
             duplicate_check: Duration::ZERO,
+            first_step_waits_for: Vec::new(),
         }
+    }
+
+    #[test]
+    fn the_first_step_waits_only_for_modules_of_the_robot() {
+        let mut c = config();
+        c.first_step_waits_for = vec!["arm0".into(), "leg7".into()];
+        let err = check_config(&c).unwrap_err().to_string();
+        assert!(
+            err.contains("no module `leg7`") && err.contains("its modules: "),
+            "{err}"
+        );
+        c.first_step_waits_for.pop();
+        assert!(check_config(&c).is_ok());
     }
 
     fn status(counters: &Counters, malformed: u64) -> DiagnosticStatus {
