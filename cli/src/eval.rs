@@ -310,11 +310,8 @@ pub fn evaluate_whole_body(args: &EvalBodyArgs) -> Result<BodyEvaluations> {
     let push = args.push()?;
     args.check_outputs()?;
     let model = load_model(&args.morphology)?;
-    let file = crate::train::read_shipped_policy_config(
-        args.config.as_deref(),
-        &model.name,
-        args.variant,
-    )?;
+    let file =
+        crate::train::body_config_for(&model, args.config.as_deref(), args.variant, true)?.config;
     let path =
         args.variant
             .require_policy(&model.name, &args.morphology, args.policy.as_deref(), None)?;

@@ -141,11 +141,13 @@ fn goal_bounds(args: GoalBoundsArgs) -> Result<()> {
     for morphology in &args.morphologies {
         let model = assemble(&load_morphology(morphology, &library)?, &library);
         let robot = &model.name;
-        let config = crate::train::read_body_config(
+        let config = crate::train::body_config_for(
+            &model,
             args.config.as_deref(),
-            robot,
             crate::train::Variant::Hierarchical,
-        )?;
+            false,
+        )?
+        .config;
         let terms = ActionTerms::new(&model, &config.goal_bounds()?)
             .with_context(|| format!("the action terms of {robot}"))?;
         for term in terms.arms() {

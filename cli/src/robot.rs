@@ -16,7 +16,7 @@ use kumi_worlds::Engine;
 use serde::Serialize;
 
 use crate::sim::{load_model, simulate, PhysicsArgs, SimArgs};
-use crate::train::{read_body_config, TrainBodyConfig, Variant};
+use crate::train::{body_config_for, TrainBodyConfig, Variant, DEFAULT_RECIPE_ROBOT};
 
 /// How long the robot stands on the skill for the check [s] (as `kumi sim`'s default).
 const STANDING_S: f64 = 10.0;
@@ -164,7 +164,7 @@ fn summarise(model: &RobotModel, args: &RobotArgs) -> Result<RobotSummary> {
     let advice = if own_config {
         Vec::new()
     } else {
-        advice(model, &arms, &config)
+        advice(&args.morphology, &config)
     };
     Ok(RobotSummary {
         robot: model.name.clone(),
@@ -192,24 +192,19 @@ fn summarise(model: &RobotModel, args: &RobotArgs) -> Result<RobotSummary> {
 }
 
 /// The config that sizes the policy, where it came from, and whether it is the robot's own
-/// (given, or shipped for it).
+/// (given, or shipped for it) rather than the default recipe.
 fn config_for(model: &RobotModel, args: &RobotArgs) -> Result<(TrainBodyConfig, String, bool)> {
-    if let Some(path) = &args.config {
-        let config = read_body_config(Some(path), &model.name, Variant::Hierarchical)?;
-        return Ok((config, path.display().to_string(), true));
-    }
-    match read_body_config(None, &model.name, Variant::Hierarchical) {
-        Ok(config) => Ok((
-            config,
-            format!("train/configs/whole_body/{}.toml", model.name),
-            true,
-        )),
-        Err(_) => Ok((
-            read_body_config(None, "dragon", Variant::Hierarchical)?,
-            "train/configs/whole_body/dragon.toml (none of its own: the one to start from)".into(),
-            false,
-        )),
-    }
+    let chosen = body_config_for(model, args.config.as_deref(), Variant::Hierarchical, false)?;
+    Ok((chosen.config, chosen.label, !chosen.default_recipe))
+}
+
+/// The manipulator tool's height above the ground with the robot standing at home [m]
+/// (`None`: the robot has no manipulator module).
+pub fn manipulator_standing_height_m(model: &RobotModel) -> Result<Option<f64>> {
+    Ok(arm_summaries(model)?
+        .into_iter()
+        .find(|a| a.role == Role::Manipulator.to_string())
+        .map(|a| a.standing_tool_height_m))
 }
 
 /// Each arm module's home tool pose, and its tool's height with the robot standing at home.
@@ -240,28 +235,19 @@ fn arm_summaries(model: &RobotModel) -> Result<Vec<ArmSummary>> {
         .collect()
 }
 
-/// What a config for a robot without one should set: the targets around the manipulator's
-/// standing tool height, the tilt limit.
-fn advice(model: &RobotModel, arms: &[ArmSummary], config: &TrainBodyConfig) -> Vec<String> {
-    let mut advice = vec![format!(
-        "start from train/configs/whole_body/dragon.toml (kumi train whole-body {} --config FILE)",
-        model.name
-    )];
-    match arms.iter().find(|a| a.role == Role::Manipulator.to_string()) {
-        Some(m) => advice.push(format!(
-            "[task] target_z_m: around the manipulator's standing tool height, {:.2} m (Dragon's config: [{}, {}])",
-            m.standing_tool_height_m, config.task.target_z_m[0], config.task.target_z_m[1]
-        )),
-        None => advice.push(
-            "[task] target_z_m: the robot has no manipulator module, whose tool the task steers"
-                .into(),
+/// What to know about training a robot on the default recipe, and what a config of its own
+/// would set instead.
+fn advice(morphology: &str, config: &TrainBodyConfig) -> Vec<String> {
+    let [lo, hi] = config.task.target_z_m;
+    vec![
+        format!(
+            "no config needed: `kumi train whole-body {morphology}` trains on the default recipe (train/configs/whole_body/{DEFAULT_RECIPE_ROBOT}.toml), its targets at {lo:.2}-{hi:.2} m ({DEFAULT_RECIPE_ROBOT}'s, moved with the manipulator's standing tool height)"
         ),
-    }
-    advice.push(format!(
-        "[task] tilt_limit_rad: the tilt this robot should not pass (Dragon's: {} rad)",
-        config.task.tilt_limit_rad
-    ));
-    advice
+        format!(
+            "a config of its own (--config FILE, every key in docs/config-reference.md) would set [task] tilt_limit_rad, the tilt this robot should not pass (the recipe's: {} rad), and target_z_m where its targets should be",
+            config.task.tilt_limit_rad
+        ),
+    ]
 }
 
 fn print(s: &RobotSummary) {

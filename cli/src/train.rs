@@ -210,7 +210,7 @@ impl Variant {
             other => format!(" --variant {other}"),
         };
         bail!(
-            "no {self} policy for `{robot}`: none is shipped ({shipped}) and training has not written {trained}. Train one with `kumi train whole-body {morphology}{variant} --config CONFIG` (it writes {trained}, which this command then finds; CONFIG: docs/config-reference.md) or pass --policy FILE{or}",
+            "no {self} policy for `{robot}`: none is shipped ({shipped}) and training has not written {trained}. Train one with `kumi train whole-body {morphology}{variant}` (the robot's config, or the default recipe when it has none; it writes {trained}, which this command then finds) or pass --policy FILE{or}",
             shipped = self.shipped_policy(robot).display(),
             trained = self.trained_policy(robot).display(),
         )
@@ -382,6 +382,87 @@ pub fn read_shipped_policy_config(
 ) -> Result<TrainBodyConfig> {
     let last_first = SHIPPED_LAST_STAGES.iter().chain(&SHIPPED_BODY_CONFIGS);
     read_config_from(path, robot, variant, last_first)
+}
+
+/// The shipped robot whose recipe trains a robot kumi ships no config for: Dragon, a
+/// manipulator on a wheel module and a leg carrying another, the nearest to what the shipped
+/// modules assemble into.
+pub const DEFAULT_RECIPE_ROBOT: &str = "dragon";
+
+/// The default recipe's target heights [m] for a robot whose manipulator tool stands
+/// `standing_m` [m] above the ground at home: the recipe robot's own range `recipe_z_m`, moved
+/// by how much higher or lower that tool stands than the recipe robot's (`recipe_standing_m`),
+/// to the centimetre. For the recipe robot itself, its own range. Pure.
+pub fn target_heights_m(recipe_z_m: [f64; 2], recipe_standing_m: f64, standing_m: f64) -> [f64; 2] {
+    let shift_m = ((standing_m - recipe_standing_m) * 100.0).round() / 100.0;
+    [recipe_z_m[0] + shift_m, recipe_z_m[1] + shift_m]
+}
+
+/// The whole-body config for `model` and `variant`, and where it came from: `path`; else the
+/// one shipped for the robot (with `last_stage`, the one its shipped policy finished with);
+/// else the default recipe ([`DEFAULT_RECIPE_ROBOT`]'s), its targets moved with this robot's
+/// manipulator tool ([`target_heights_m`]). Training, evaluation and `kumi robot` take it
+/// from here, so a robot kumi does not ship needs no config of its own.
+pub fn body_config_for(
+    model: &kumi_model::RobotModel,
+    path: Option<&std::path::Path>,
+    variant: Variant,
+    last_stage: bool,
+) -> Result<ChosenConfig> {
+    let robot = model.name.as_str();
+    let shipped = SHIPPED_BODY_CONFIGS
+        .iter()
+        .any(|(name, v, _)| *name == robot && *v == variant);
+    if path.is_some() || shipped {
+        let label = path.map_or_else(
+            || format!("train/configs/{}/{robot}.toml", variant.config_dir()),
+            |p| p.display().to_string(),
+        );
+        let config = if last_stage {
+            read_shipped_policy_config(path, robot, variant)?
+        } else {
+            read_body_config(path, robot, variant)?
+        };
+        return Ok(ChosenConfig {
+            config,
+            label,
+            default_recipe: false,
+        });
+    }
+    let mut config = read_body_config(None, DEFAULT_RECIPE_ROBOT, variant).with_context(|| {
+        format!("`{robot}` has no {variant} config of its own: pass --config FILE")
+    })?;
+    let standing = |m: &kumi_model::RobotModel| {
+        crate::robot::manipulator_standing_height_m(m)?.with_context(|| {
+            format!(
+                "`{}` has no manipulator module, whose tool the whole-body task steers",
+                m.name
+            )
+        })
+    };
+    let standing_m = standing(model)?;
+    let recipe_standing_m = standing(&*crate::sim::load_model(DEFAULT_RECIPE_ROBOT)?)?;
+    config.task.target_z_m =
+        target_heights_m(config.task.target_z_m, recipe_standing_m, standing_m);
+    let [lo, hi] = config.task.target_z_m;
+    let label = format!(
+        "the default recipe (train/configs/{}/{DEFAULT_RECIPE_ROBOT}.toml), its targets at {lo:.2}-{hi:.2} m: {DEFAULT_RECIPE_ROBOT}'s, moved with the manipulator tool's standing height ({standing_m:.3} m; {DEFAULT_RECIPE_ROBOT}'s {recipe_standing_m:.3} m)",
+        variant.config_dir()
+    );
+    Ok(ChosenConfig {
+        config,
+        label,
+        default_recipe: true,
+    })
+}
+
+/// A whole-body config as [`body_config_for`] chose it.
+pub struct ChosenConfig {
+    pub config: TrainBodyConfig,
+    /// Where it came from, for a person.
+    pub label: String,
+    /// It is the default recipe, the robot having no config of its own.
+    pub default_recipe: bool,
 }
 
 /// The config at `path`, else the first entry for `robot` and `variant` in `shipped`.
@@ -717,7 +798,9 @@ fn train_arm(args: TrainArmArgs) -> Result<()> {
 
 fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
     let model = load_model(&args.morphology)?;
-    let file = read_body_config(args.config.as_deref(), &model.name, args.variant)?;
+    let chosen = body_config_for(&model, args.config.as_deref(), args.variant, false)?;
+    eprintln!("config: {}", chosen.label);
+    let file = chosen.config;
     let mut config = file.ppo.clone();
     prepare(&mut config, &args.run)?;
     let trained = TrainBodyConfig {
@@ -850,6 +933,42 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn the_default_recipe_moves_its_targets_with_the_tool_and_is_dragons_own_on_dragon() {
+        assert_eq!(target_heights_m([0.9, 1.5], 1.343, 1.343), [0.9, 1.5]);
+        let moved = target_heights_m([0.9, 1.5], 1.343, 0.851);
+        assert!(
+            (moved[0] - 0.41).abs() < 1e-9 && (moved[1] - 1.01).abs() < 1e-9,
+            "{moved:?}"
+        );
+        let dragon = crate::sim::load_model("dragon").unwrap();
+        let chosen = body_config_for(&dragon, None, Variant::Hierarchical, false).unwrap();
+        assert!(!chosen.default_recipe);
+        // A robot kumi does not ship.
+        let text = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/caterpillar.toml"),
+        )
+        .unwrap();
+        let dir = std::env::temp_dir().join(format!("kumi-recipe-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("caterpillar.toml");
+        std::fs::write(&file, text).unwrap();
+        let caterpillar = crate::sim::load_model(file.to_str().unwrap()).unwrap();
+        let chosen = body_config_for(&caterpillar, None, Variant::Hierarchical, false).unwrap();
+        assert!(chosen.default_recipe, "{}", chosen.label);
+        let [lo, hi] = chosen.config.task.target_z_m;
+        assert!(
+            (hi - lo - 0.6).abs() < 1e-9 && (0.8..1.1).contains(&lo),
+            "{lo}-{hi}"
+        );
+        assert!(
+            chosen.label.contains("the default recipe"),
+            "{}",
+            chosen.label
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn every_shipped_whole_body_config_parses_as_its_variant() {

@@ -956,7 +956,7 @@ fn the_example_morphology_stands_and_its_whole_body_task_builds() {
     assert!(err.contains("no-such-policy.onnx"), "{err}");
 
     // Without --policy, evaluation looks where training writes (relative to where it runs),
-    // and says so, with a training command that names its config.
+    // and says so, with the training command that writes it.
     let dir = std::env::temp_dir().join(format!("kumi-new-robot-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let eval = || {
@@ -971,7 +971,10 @@ fn the_example_morphology_stands_and_its_whole_body_task_builds() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
-        err.contains(trained) && err.contains("--config CONFIG"),
+        err.contains(trained)
+            && err.contains(&format!(
+                "Train one with `kumi train whole-body {morphology}`"
+            )),
         "{err}"
     );
     // With a file there, it is the one evaluated (this one is no policy: refused by name).

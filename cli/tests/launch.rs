@@ -635,3 +635,173 @@ fn the_whole_body_node_holds_through_a_dead_bridge_and_resumes_with_its_replacem
     assert!(number(&d["sim_restarts"]) >= 1.0, "{d}");
     drop(arm);
 }
+
+/// A morphology kumi does not ship, written here: Dragon with its manipulator on the rear wheel
+/// module instead of the front one.
+const TUG: &str = r#"
+name = "tug"
+description = "Dragon with its manipulator on the rear wheel module"
+
+[[module]]
+name = "front_wheel"
+kind = "wheel"
+role = "wheel"
+
+[[module]]
+name = "leg0"
+kind = "arm"
+role = "leg"
+mount = { parent = "front_wheel", connector = "back", spin = 1.5707963267948966 }
+home = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+[[module]]
+name = "rear_wheel"
+kind = "wheel"
+role = "wheel"
+mount = { parent = "leg0", connector = "tip", child_connector = "front", spin = 1.5707963267948966 }
+
+[[module]]
+name = "arm0"
+kind = "arm"
+role = "manipulator"
+mount = { parent = "rear_wheel", connector = "top" }
+home = [0.0, -0.3, 0.0, 1.5, 0.0, 0.3707963267948966, 0.0]
+"#;
+
+/// Runs `kumi args` in `dir` to its end (at most `deadline`); its output, and its JSON line
+/// when it printed one.
+fn kumi_in(
+    dir: &std::path::Path,
+    args: &[&str],
+    deadline: Duration,
+) -> (String, Option<serde_json::Value>) {
+    let mut p = KumiProcess::spawn_in(dir, KUMI, args, fresh_domain());
+    let start = std::time::Instant::now();
+    while p.alive() && start.elapsed() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(
+        !p.alive(),
+        "`kumi {}` ran past {deadline:?}",
+        args.join(" ")
+    );
+    let log = p.log();
+    let json = log
+        .lines()
+        .find(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).unwrap());
+    (log, json)
+}
+
+#[test]
+fn a_robot_kumi_does_not_ship_goes_from_its_file_to_a_deployed_hierarchy_with_no_config() {
+    let _one = one_at_a_time();
+    let dir = std::env::temp_dir().join(format!("kumi-tug-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("tug.toml"), TUG).unwrap();
+    let minute = Duration::from_secs(60);
+
+    // What the robot is, and that it needs no config.
+    let (log, robot) = kumi_in(&dir, &["robot", "tug.toml", "--json"], minute);
+    let robot = robot.unwrap_or_else(|| panic!("no JSON: {log}"));
+    assert_eq!(robot["robot"], "tug");
+    assert_eq!(robot["modules"].as_array().unwrap().len(), 4);
+    assert_eq!(robot["arms"].as_array().unwrap().len(), 2);
+    assert_eq!(
+        (robot["observations"].as_u64(), robot["actions"].as_u64()),
+        (Some(26), Some(12))
+    );
+    assert!(robot["standing"]["stands"].as_bool().unwrap(), "{robot}");
+    let config = robot["config"].as_str().unwrap();
+    assert!(config.starts_with("the default recipe"), "{config}");
+
+    // A short training on the default recipe, found by every command after it.
+    let (log, _) = kumi_in(
+        &dir,
+        &["train", "whole-body", "tug.toml", "--steps", "8192"],
+        5 * minute,
+    );
+    let policy = dir.join("runs/tug_whole_body/tug_whole_body.onnx");
+    assert!(policy.exists(), "no policy: {log}");
+    assert!(log.contains("config: the default recipe"), "{log}");
+
+    let (log, eval) = kumi_in(
+        &dir,
+        &[
+            "eval",
+            "whole-body",
+            "tug.toml",
+            "--rollouts",
+            "4",
+            "--json",
+        ],
+        5 * minute,
+    );
+    let eval = eval.unwrap_or_else(|| panic!("no JSON: {log}"));
+    assert_eq!(
+        (eval["robot"].as_str(), eval["rollouts"].as_u64()),
+        (Some("tug"), Some(4))
+    );
+    assert!(
+        number(&eval["position_error_m"]["mean"]).is_finite(),
+        "{eval}"
+    );
+
+    // The demo reads the task it was trained on from the policy: targets in its range.
+    let (log, demo) = kumi_in(
+        &dir,
+        &[
+            "demo",
+            "tug.toml",
+            "--targets",
+            "2",
+            "--seconds",
+            "2",
+            "--json",
+        ],
+        4 * minute,
+    );
+    let demo = demo.unwrap_or_else(|| panic!("no JSON: {log}"));
+    assert!(
+        log.contains("(the metadata of runs/tug_whole_body/tug_whole_body.onnx)"),
+        "{log}"
+    );
+    let [lo, hi] = [0.89, 1.49];
+    assert!(
+        config.contains(&format!("targets at {lo:.2}-{hi:.2} m")),
+        "{config}"
+    );
+    let targets = demo["targets"].as_array().unwrap();
+    assert_eq!(
+        targets.len() + demo["skipped"].as_u64().unwrap() as usize,
+        2,
+        "{demo}"
+    );
+    for t in targets {
+        let z = number(&t["target"][2]);
+        assert!(
+            (lo..=hi).contains(&z),
+            "target height {z} outside the trained {lo}-{hi} m"
+        );
+        assert!(number(&t["position_error_m"]).is_finite(), "{t}");
+    }
+
+    // The launch: every node up, the whole-body node on the trained policy and its tilt limit.
+    let launch = KumiProcess::spawn_in(&dir, KUMI, &["launch", "tug.toml"], fresh_domain());
+    assert!(
+        launch.wait_for_log("whole-body node up", START),
+        "{}",
+        launch.log()
+    );
+    let log = launch.log();
+    for node in ["sim_bridge", "leg0", "arm0", "whole_body"] {
+        assert!(log.contains(&format!("[{node}]")), "no {node}: {log}");
+    }
+    assert!(
+        log.contains("tilt limit 1 rad: the policy's training limit (the metadata of runs/tug_whole_body/tug_whole_body.onnx)"),
+        "{log}"
+    );
+    drop(launch);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -473,6 +473,21 @@ impl KumiProcess {
     /// Starts `exe args` on `domain` (under `prefix`, for example `ip netns exec NS`), with the
     /// ONNX Runtime library of [`onnxruntime_library`].
     pub fn spawn(exe: &str, prefix: &[&str], args: &[&str], domain: u16) -> Self {
+        Self::spawn_with(exe, prefix, args, domain, None)
+    }
+
+    /// [`Self::spawn`] in the working directory `dir` (where `runs/` is written and read).
+    pub fn spawn_in(dir: &std::path::Path, exe: &str, args: &[&str], domain: u16) -> Self {
+        Self::spawn_with(exe, &[], args, domain, Some(dir))
+    }
+
+    fn spawn_with(
+        exe: &str,
+        prefix: &[&str],
+        args: &[&str],
+        domain: u16,
+        dir: Option<&std::path::Path>,
+    ) -> Self {
         static SERIAL: AtomicU16 = AtomicU16::new(0);
         let label = args.join(" ");
         let log = std::env::temp_dir().join(format!(
@@ -481,7 +496,11 @@ impl KumiProcess {
             SERIAL.fetch_add(1, Ordering::Relaxed)
         ));
         let file = std::fs::File::create(&log).expect("create the log file");
-        let child = command_under(prefix, exe.as_ref())
+        let mut command = command_under(prefix, exe.as_ref());
+        if let Some(dir) = dir {
+            command.current_dir(dir);
+        }
+        let child = command
             .args(args)
             .env("ROS_DOMAIN_ID", domain.to_string())
             .env("ORT_DYLIB_PATH", onnxruntime_library())
