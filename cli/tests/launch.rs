@@ -805,3 +805,60 @@ fn a_robot_kumi_does_not_ship_goes_from_its_file_to_a_deployed_hierarchy_with_no
     drop(launch);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 69, item 3: `ros2 param list` and `ros2 param get` on every node, as rclpy's parameter
+/// services client does them; settings are read-only.
+#[test]
+fn ros2_param_list_and_get_answer_every_nodes_settings_read_only() {
+    let _one = one_at_a_time();
+    let domain = fresh_domain();
+    let _launch = launch(domain, &["minimal", "--lockstep"]);
+    let params = |node: &str| {
+        let out = peer(
+            domain,
+            &["params", "--kind", node, "--timeout", "20"],
+            Duration::from_secs(90),
+        );
+        assert!(out.get("error").is_none(), "{node}: {out}");
+        println!("{node}: {out}");
+        let set = &out["set"][0];
+        assert_eq!(set["successful"], false, "{node}: {out}");
+        assert!(
+            set["reason"].as_str().unwrap().contains("read-only"),
+            "{out}"
+        );
+        assert!(
+            out["read_only"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|r| r == true),
+            "{out}"
+        );
+        out["values"].clone()
+    };
+    let bridge = params("/minimal/sim_bridge");
+    assert_eq!(bridge["robot"], "minimal");
+    assert_eq!(bridge["mode"], "lockstep");
+    assert_eq!(bridge["lockstep_timeout_s"], 5.0);
+    assert_eq!(bridge["wait_for"], serde_json::json!(["arm0", "wheel0"]));
+    let arm = params("/minimal/arm0/arm_node");
+    assert_eq!(arm["module"], "arm0");
+    assert_eq!(arm["goal_sync_s"], 2.5);
+    assert!(
+        arm["policy.file"]
+            .as_str()
+            .unwrap()
+            .ends_with("arm_reach.onnx"),
+        "{arm}"
+    );
+    let skill = std::fs::read(arm["policy.file"].as_str().unwrap()).unwrap();
+    assert_eq!(
+        arm["policy.fingerprint"],
+        kumi_policies::metadata::fingerprint_bytes(&skill)
+    );
+    let whole_body = params("/minimal/whole_body");
+    assert_eq!(whole_body["lockstep"], true);
+    assert_eq!(whole_body["tilt_limit_rad"], 0.6);
+    assert_eq!(whole_body["skill.fingerprint"], arm["policy.fingerprint"]);
+}

@@ -854,6 +854,47 @@ def cmd_badinput(args, peer):
     return out
 
 
+def call(peer, srv_type, name, request, timeout):
+    client = peer.create_client(srv_type, name)
+    try:
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise RuntimeError(f"no service {name} within {timeout} s")
+        future = client.call_async(request)
+        deadline = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < deadline:
+            rclpy.spin_once(peer, timeout_sec=0.05)
+        if not future.done():
+            raise RuntimeError(f"{name}: no response within {timeout} s")
+        return future.result()
+    finally:
+        peer.destroy_client(client)
+
+
+def cmd_params(args, peer):
+    """What `ros2 param list`, `ros2 param get`, `ros2 param describe` and `ros2 param set` do,
+    against the node `--kind` (its fully qualified name): each through the node's
+    rcl_interfaces services."""
+    from rcl_interfaces.msg import Parameter, ParameterValue
+    from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters,
+                                    SetParameters)
+    from rclpy.parameter import parameter_value_to_python
+    node = args.kind
+    names = list(call(peer, ListParameters, f"{node}/list_parameters", ListParameters.Request(),
+                      args.timeout).result.names)
+    values = call(peer, GetParameters, f"{node}/get_parameters",
+                  GetParameters.Request(names=names), args.timeout).values
+    described = call(peer, DescribeParameters, f"{node}/describe_parameters",
+                     DescribeParameters.Request(names=names), args.timeout).descriptors
+    set_request = SetParameters.Request(parameters=[Parameter(
+        name=names[0], value=ParameterValue(type=4, string_value="changed"))])
+    refused = call(peer, SetParameters, f"{node}/set_parameters", set_request, args.timeout).results
+    return {
+        "values": {n: parameter_value_to_python(v) for n, v in zip(names, values)},
+        "read_only": [d.read_only for d in described],
+        "set": [{"successful": r.successful, "reason": r.reason} for r in refused],
+    }
+
+
 def cmd_latency(args, peer):
     """Median and p99 time from publishing increments to the first joint state that moves."""
     io = arm_io(args, peer)
@@ -913,7 +954,7 @@ def main():
             "reach": cmd_reach, "armnode": cmd_armnode, "watch": cmd_watch,
             "malformed": cmd_malformed, "zerobyte": cmd_zerobyte, "rosout": cmd_rosout,
             "flood": cmd_flood, "target": cmd_target, "fakelimb": cmd_fakelimb,
-            "diagnostics": cmd_diagnostics, "fakeodom": cmd_fakeodom,
+            "diagnostics": cmd_diagnostics, "fakeodom": cmd_fakeodom, "params": cmd_params,
         }[args.command](args, peer)
         note(f"{args.command} done")
     except BaseException:

@@ -19,6 +19,7 @@ use kumi_msgs::std_msgs::{Float64MultiArray, Header};
 use kumi_policies::kinematics::ToolKinematics;
 use kumi_policies::observation::{BASE_DIM, JOINTS};
 use kumi_policies::skill::{ArmSkill, SkillError};
+use kumi_ros::parameters::{ParameterValue, Settings};
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_runtime::{BackendChoice, RuntimeError, SkillPolicy};
 use nalgebra::Isometry3;
@@ -215,6 +216,35 @@ fn listen_to_own_output(
 }
 
 /// Publishes the node's diagnostics once a second.
+/// The node's settings, as its read-only ROS parameters
+/// (`ros2 param list /<robot>/<module>/arm_node`).
+fn settings(config: &ArmNodeConfig, output: Output) -> Settings {
+    use ParameterValue::{Boolean, Double, String as Text};
+    let mut s = Settings::new();
+    s.insert("robot".into(), Text(config.robot.clone()));
+    s.insert("module".into(), Text(config.module.clone()));
+    s.insert("morphology".into(), Text(config.model.name.clone()));
+    let fingerprint = kumi_policies::metadata::fingerprint_bytes;
+    kumi_ros::parameters::file(&mut s, "policy", &config.policy, fingerprint);
+    s.insert(
+        "backend".into(),
+        Text(format!("{:?}", config.backend).to_lowercase()),
+    );
+    s.insert("output".into(), Text(format!("{output:?}").to_lowercase()));
+    s.insert(
+        "clock".into(),
+        Text(format!("{:?}", config.clock).to_lowercase()),
+    );
+    s.insert("stale_after_s".into(), Double(config.stale_after_s));
+    s.insert("goal_sync_s".into(), Double(config.goal_sync_s));
+    s.insert(
+        "wait_for_first_goal".into(),
+        Boolean(config.wait_for_first_goal),
+    );
+    s.insert("hardware".into(), Boolean(config.hardware.is_some()));
+    s
+}
+
 fn publish_report(
     io: &Io,
     report_at: &mut Instant,
@@ -307,6 +337,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+    let parameters = node.parameter_services(settings(&config, output))?;
     let mut warned_about = std::collections::BTreeSet::new();
     info!(
         "arm node up: /{robot}/{module}, joint states from {joint_states_topic}, output {output:?} on {output_topic}, clock {:?}, domain {}",
@@ -330,6 +361,7 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     let mut liveliness_at = Instant::now();
 
     while !shutdown.load(Ordering::Relaxed) {
+        parameters.poll();
         // Someone who started commanding this module later (a second arm node refuses to
         // start when it hears this one; `ros2 topic pub` does not).
         for writer in heard() {

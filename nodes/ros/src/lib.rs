@@ -11,6 +11,7 @@
 pub mod geometry;
 pub mod joint_state;
 pub mod motion_stack;
+pub mod parameters;
 pub mod qos;
 pub mod rosout;
 pub mod strict;
@@ -95,6 +96,15 @@ impl RosNode {
 
     pub fn domain_id(&self) -> u16 {
         self.context.domain_id()
+    }
+
+    /// Serves `settings` as this node's read-only ROS parameters ([`parameters`]); the caller
+    /// answers requests with [`parameters::ParameterServices::poll`] from its loop.
+    pub fn parameter_services(
+        &mut self,
+        settings: parameters::Settings,
+    ) -> Result<parameters::ParameterServices, RosError> {
+        parameters::ParameterServices::new(&mut self.node, settings)
     }
 
     /// How many writers of other participants publish on the absolute topic `full_name`, as

@@ -22,6 +22,7 @@ use kumi_msgs::nav_msgs::Odometry;
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_msgs::std_msgs::{Float64, Header};
 use kumi_ros::motion_stack::MotionStackProfile;
+use kumi_ros::parameters::{ParameterValue, Settings};
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_runtime::{BackendChoice, ModelFile, RuntimeError, WholeBodyPolicy};
 use kumi_terms::{ActionTerms, GoalBounds, ObservationOptions, Target};
@@ -494,6 +495,32 @@ fn start_target(controller: &mut WholeBodyController, report: &mut Report, t: Ta
     true
 }
 
+/// The node's settings, as its read-only ROS parameters (`ros2 param list /<robot>/whole_body`).
+fn settings(config: &WholeBodyNodeConfig, controller: &WholeBodyController) -> Settings {
+    use ParameterValue::{Boolean, Double, String as Text};
+    let mut s = Settings::new();
+    s.insert("robot".into(), Text(config.robot.clone()));
+    s.insert("morphology".into(), Text(config.model.name.clone()));
+    let fingerprint = kumi_policies::metadata::fingerprint_bytes;
+    kumi_ros::parameters::file(&mut s, "policy", &config.policy, fingerprint);
+    kumi_ros::parameters::file(&mut s, "skill", &config.skill, fingerprint);
+    s.insert(
+        "backend".into(),
+        Text(format!("{:?}", config.backend).to_lowercase()),
+    );
+    s.insert("stale_after_s".into(), Double(config.stale_after_s));
+    s.insert(
+        "max_target_distance_m".into(),
+        Double(config.max_target_distance_m),
+    );
+    if let Some(limit) = controller.tilt_limit_rad() {
+        s.insert("tilt_limit_rad".into(), Double(limit));
+    }
+    s.insert("lockstep".into(), Boolean(config.lockstep));
+    s.insert("hardware".into(), Boolean(config.hardware.is_some()));
+    s
+}
+
 /// Runs the node until `shutdown` is set.
 pub fn run(
     config: WholeBodyNodeConfig,
@@ -510,6 +537,7 @@ pub fn run(
     let mut steering = SteeringRates::new(&config.model);
     let io = open_io(&mut node, &config, &controller, &steering)?;
     refuse_duplicates(&mut node, &config, io.tool_pose.gid())?;
+    let parameters = node.parameter_services(settings(&config, &controller))?;
     // Targets and the tool pose are in the odometry's frame: `<robot>/odom` from the sim
     // bridge, whatever the odometry says on hardware.
     let mut odom_frame = topics::odom_frame(robot);
@@ -784,6 +812,7 @@ pub fn run(
                 report.latency(odometry_age_s + decided_at.elapsed().as_secs_f64());
             }
         }
+        parameters.poll();
         if report_at.elapsed() >= Duration::from_secs(1) {
             report_at = Instant::now();
             let _ = io.diagnostics.publish(DiagnosticArray {

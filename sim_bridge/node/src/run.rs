@@ -12,6 +12,7 @@ use kumi_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
 use kumi_msgs::rosgraph_msgs::Clock;
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_msgs::std_msgs::{Float64, Float64MultiArray, Header, StringMsg};
+use kumi_ros::parameters::{ParameterValue, Settings};
 use kumi_ros::{qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_worlds::{Engine, SimConfig, SimError, SimWorld};
 use nalgebra::Vector3;
@@ -426,6 +427,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     )?;
     refuse_duplicates(&node, &config)?;
     let io = open_io(&mut node, &config, &tree)?;
+    let parameters = node.parameter_services(settings(&config, world.as_ref()))?;
     info!(
         robot = %config.robot,
         domain = node.domain_id(),
@@ -481,6 +483,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     publish_state(world.as_ref(), steps, &accel_w);
 
     while !shutdown.load(Ordering::Relaxed) {
+        parameters.poll();
         let now_s = sim_time_s(steps, control_dt);
         // Commands.
         for inputs in &io.inputs {
@@ -617,6 +620,37 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     drop(rosout);
     drop(node);
     Ok(())
+}
+
+/// The bridge's settings, as its read-only ROS parameters (`ros2 param list
+/// /<robot>/sim_bridge`).
+fn settings(config: &BridgeConfig, world: &dyn SimWorld) -> Settings {
+    use ParameterValue::{Double, String as Text, StringArray};
+    let mut s = Settings::new();
+    s.insert("robot".into(), Text(config.robot.clone()));
+    s.insert("morphology".into(), Text(config.model.name.clone()));
+    s.insert("engine".into(), Text(config.engine.to_string()));
+    s.insert(
+        "physics".into(),
+        Text(world.config().label_for(config.engine)),
+    );
+    s.insert("control_hz".into(), Double(world.config().control_hz));
+    s.insert("stale_after_s".into(), Double(config.stale_after_s));
+    match config.mode {
+        Mode::RealTime { factor } => {
+            s.insert("mode".into(), Text("real_time".into()));
+            s.insert("realtime_factor".into(), Double(factor));
+        }
+        Mode::Lockstep { timeout } => {
+            s.insert("mode".into(), Text("lockstep".into()));
+            s.insert("lockstep_timeout_s".into(), Double(timeout.as_secs_f64()));
+            s.insert(
+                "wait_for".into(),
+                StringArray(config.first_step_waits_for.clone()),
+            );
+        }
+    }
+    s
 }
 
 fn module_of(update: &Update) -> &str {
