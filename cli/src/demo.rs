@@ -18,7 +18,8 @@ use kumi_msgs::diagnostic_msgs::DiagnosticArray;
 use kumi_msgs::geometry_msgs::PoseStamped;
 use kumi_msgs::nav_msgs::Odometry;
 use kumi_msgs::std_msgs::Header;
-use kumi_ros::{geometry, qos, topics, RosNode};
+use kumi_ros::services::TriggerClient;
+use kumi_ros::{geometry, qos, topics, Publisher, RosNode};
 use kumi_terms::observation::{target_errors, tool_yaw, Target};
 use kumi_terms::termination::tilt;
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
@@ -131,7 +132,7 @@ struct Outcome {
 struct Report {
     robot: String,
     targets: Vec<Outcome>,
-    /// Targets not sent because the robot had tipped over.
+    /// Targets not sent: the robot had tipped over and the world could not be reset.
     skipped: usize,
     /// Ticks that did not wait for every node (the nodes' `lockstep_timeouts`, `late_goals`
     /// and `unsynchronised_ticks`): 0 when the run repeats exactly.
@@ -299,22 +300,344 @@ impl Schedule {
     }
 }
 
-/// Sends the targets one by one, each placed around where the base stands then, and records
-/// the run; returns the targets as sent. In lockstep the run is repeatable: a later target is
-/// stamped with the simulated time it starts at (the whole-body node waits for it) and placed
-/// around the base as it stood a fixed time before, and every sample pairs the tool pose and the
-/// odometry of the same tick. A robot that tilts past `tilt_limit_rad` has tipped over (the
-/// whole-body node stops driving it): the remaining targets are not sent.
 /// A run as [`drive`] recorded it.
+#[derive(Default)]
 struct Driven {
     /// The targets as sent.
     placed: Vec<Target>,
     samples: Vec<Sample>,
-    tipped: Option<TippedOver>,
+    /// Each time the robot tipped over (the world was reset after it).
+    tipped: Vec<TippedOver>,
     /// Ticks that did not wait for every node ([`Exactness`]).
     inexact_ticks: u64,
 }
 
+/// The demo's node: what it sends, what it watches.
+struct Peer<'a> {
+    node: RosNode,
+    publisher: Publisher<PoseStamped>,
+    tool: kumi_ros::StrictSubscription<PoseStamped>,
+    odom: kumi_ros::StrictSubscription<Odometry>,
+    diagnostics: kumi_ros::StrictSubscription<DiagnosticArray>,
+    reset: TriggerClient,
+    exactness: Exactness,
+    /// Target messages published so far.
+    sent: u64,
+    /// After a reset, until the first tool pose of the new world: the tick of the latest one of
+    /// the old (the whole-body node's may still be on their way).
+    tool_before_reset: Option<i64>,
+    frame: String,
+    robot: &'a str,
+    shutdown: &'a AtomicBool,
+    launched: &'a mut Launch,
+}
+
+/// One stretch of simulated time without a reset: the targets it drove, the samples, and
+/// where it ended if the robot tipped over.
+struct Segment {
+    placed: Vec<Target>,
+    samples: Vec<Sample>,
+    /// The target (index into the run's) during which the base tilted past the limit, and the
+    /// tick.
+    tipped: Option<(usize, i64)>,
+}
+
+impl<'a> Peer<'a> {
+    fn new(
+        robot: &'a str,
+        domain: u16,
+        shutdown: &'a AtomicBool,
+        launched: &'a mut Launch,
+    ) -> Result<Self> {
+        let mut node = RosNode::new(&format!("/{robot}"), "demo", domain)?;
+        Ok(Self {
+            publisher: node.publisher(&topics::robot_goal_pose(robot), qos::default())?,
+            tool: node.strict_subscription(&topics::tool_pose(robot), qos::default())?,
+            odom: node.strict_subscription(&topics::odom(robot), qos::default())?,
+            diagnostics: node.strict_subscription(topics::DIAGNOSTICS, qos::default())?,
+            reset: node.trigger_client(&topics::reset(robot))?,
+            node,
+            exactness: Exactness::default(),
+            sent: 0,
+            tool_before_reset: None,
+            frame: topics::odom_frame(robot),
+            robot,
+            shutdown,
+            launched,
+        })
+    }
+
+    /// Every node up: the whole-body node's and each arm node's outputs are discovered.
+    fn wait_for_nodes(&mut self, model: &kumi_model::RobotModel) -> Result<()> {
+        let mut outputs = vec![topics::tool_pose(self.robot)];
+        for m in model.modules.iter().filter(|m| m.ee_link.is_some()) {
+            outputs.push(topics::joint_increments(self.robot, &m.name));
+        }
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while outputs.iter().any(|t| self.node.remote_publishers(t) == 0) {
+            if let Some((name, status)) = self.launched.exited() {
+                bail!("node `{name}` exited ({status}) during start-up; see the nodes' log");
+            }
+            if Instant::now() > deadline || self.shutdown.load(Ordering::Relaxed) {
+                bail!("the nodes did not come up within 120 s; see the nodes' log");
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        std::thread::sleep(Duration::from_secs(1));
+        Ok(())
+    }
+
+    fn check(&mut self) -> Result<()> {
+        if self.shutdown.load(Ordering::Relaxed) {
+            bail!("interrupted");
+        }
+        if let Some((name, status)) = self.launched.exited() {
+            bail!("node `{name}` exited ({status}); see the nodes' log");
+        }
+        Ok(())
+    }
+
+    fn publish(&mut self, target: &Target, starts_at_s: Option<f64>) {
+        let _ = self
+            .publisher
+            .publish(target_msg(target, &self.frame, starts_at_s));
+        self.sent += 1;
+    }
+
+    /// Drives `targets` (the run's from index `first` on) from the tick the robot's time stands
+    /// at, each placed around the base as [`Schedule`] says; the first is `preplaced` when the
+    /// robot already has it. Ends after the last target's ticks, or when the base tilts past
+    /// `tilt_limit_rad`.
+    fn segment(
+        &mut self,
+        targets: &[Target],
+        first: usize,
+        seconds: f64,
+        tilt_limit_rad: Option<f64>,
+        preplaced: Option<Target>,
+        odometry: BTreeMap<i64, BaseSample>,
+    ) -> Result<Segment> {
+        let mut odometry = odometry;
+        // After a reset the new world's time began at its first odometry (the robot has its
+        // target and moves at once); before the first target time stands still.
+        let start = match preplaced {
+            Some(_) => odometry.keys().next().copied(),
+            None => {
+                self.read(&mut odometry, None);
+                odometry.keys().last().copied()
+            }
+        };
+        let schedule = Schedule::new(start.unwrap_or(0), seconds);
+        let end = schedule.begin(targets.len());
+        // The tool pose of each tick; odometry is paired with it at the end (the two topics
+        // arrive in either order).
+        let mut tool_poses: BTreeMap<i64, Isometry3<f64>> = BTreeMap::new();
+        let mut placed: Vec<Target> = preplaced.into_iter().collect();
+        let mut sent_at = None::<Instant>;
+        let mut tipped_at: Option<i64> = None;
+        let mut last_sample_at = Instant::now();
+        let mut late = std::collections::BTreeSet::new();
+        loop {
+            self.check()?;
+            self.read(&mut odometry, None);
+            if let (None, Some(limit)) = (tipped_at, tilt_limit_rad) {
+                tipped_at = odometry
+                    .range(schedule.start + 1..=end)
+                    .find(|(_, b)| b.tilt_rad > limit)
+                    .map(|(k, _)| *k);
+            }
+            // The next target, once the base pose it is placed around is known.
+            let next = placed.len();
+            if next < targets.len() && tipped_at.is_none() {
+                if let Some(base) = odometry.range(schedule.placed_at(next)..).next() {
+                    let xy = [base.1.xy_yaw[0], base.1.xy_yaw[1]];
+                    placed.push(place(&targets[next], xy));
+                    sent_at = None;
+                }
+            }
+            // The latest target is sent until its ticks begin (a target sent before the
+            // whole-body node's subscription is matched would be lost); repeating it changes
+            // nothing. The first applies at once, a later one at its stamp.
+            let latest = tool_poses.keys().last().copied().unwrap_or(schedule.start);
+            if let Some(target) = placed.last().copied() {
+                let i = placed.len() - 1;
+                let started = schedule.target_of(latest).is_some_and(|t| t >= i);
+                if !started && sent_at.is_none_or(|s| s.elapsed() > Duration::from_millis(500)) {
+                    let stamp = (i > 0).then(|| schedule.begin(i) as f64 / TICKS_PER_S);
+                    self.publish(&target, stamp);
+                    sent_at = Some(Instant::now());
+                }
+            }
+            while let Some((tick, pose)) = self.take_tool() {
+                let Some(i) = schedule.target_of(tick).filter(|_| tick <= end) else {
+                    continue;
+                };
+                if i >= placed.len() {
+                    if late.insert(i) {
+                        eprintln!(
+                            "target {}: not sent before its time (this process fell behind); it starts late, and this run will not repeat exactly",
+                            first + i + 1
+                        );
+                    }
+                    continue;
+                }
+                tool_poses.insert(tick, pose);
+                last_sample_at = Instant::now();
+                if tick == schedule.begin(i + 1) {
+                    print_outcome(first + i, &placed[i], &pose, schedule.after_s(i, tick));
+                }
+            }
+            let last = tipped_at.unwrap_or(end);
+            if tool_poses.range(last..).next().is_some() {
+                break;
+            }
+            if last_sample_at.elapsed() > Duration::from_secs(60) {
+                bail!(
+                    "no tool pose from the whole-body node for 60 s (target {}); see the nodes' log",
+                    first + placed.len()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        // Every sample's odometry (sent before the tool pose of its tick, but maybe not here).
+        let last = tipped_at.unwrap_or(end);
+        let waited = Instant::now();
+        while odometry.range(last..).next().is_none() && waited.elapsed() < Duration::from_secs(5) {
+            std::thread::sleep(Duration::from_millis(1));
+            self.read(&mut odometry, None);
+        }
+        let samples = tool_poses
+            .range(..=last)
+            .filter_map(|(&tick, pose)| {
+                let i = schedule.target_of(tick)?;
+                let base = odometry
+                    .range(..=tick)
+                    .next_back()
+                    .map_or_else(BaseSample::default, |(_, b)| *b);
+                Some(Sample {
+                    t_s: tick as f64 / TICKS_PER_S,
+                    target: first + i,
+                    base: base.xy_yaw,
+                    tilt_rad: base.tilt_rad,
+                    tool: *pose,
+                })
+            })
+            .collect();
+        let tipped = tipped_at.and_then(|tick| {
+            let i = schedule.target_of(tick)?;
+            placed.truncate(i + 1);
+            Some((first + i, tick))
+        });
+        Ok(Segment {
+            placed,
+            samples,
+            tipped,
+        })
+    }
+
+    /// Takes the odometry and the nodes' reports waiting; with `after` (a reset at that tick),
+    /// only odometry from after time went back.
+    fn read(&mut self, odometry: &mut BTreeMap<i64, BaseSample>, after: Option<&mut i64>) {
+        self.exactness.read(&self.diagnostics, self.robot);
+        let mut after = after;
+        while let Some(msg) = self.odom.take() {
+            let Ok((m, _)) = msg else { continue };
+            let Ok(pose) = geometry::isometry(&m.pose.pose) else {
+                continue;
+            };
+            let tick = tick_of(m.header.stamp.seconds());
+            if let Some(before) = after.as_deref_mut() {
+                if tick >= *before {
+                    // Still the world before the reset.
+                    *before = tick;
+                    continue;
+                }
+                // Time went back: the new world, from here on.
+                *before = i64::MIN;
+                after = None;
+            }
+            let p = pose.translation.vector;
+            odometry.insert(
+                tick,
+                BaseSample {
+                    xy_yaw: [p.x, p.y, tool_yaw(&pose.rotation)],
+                    tilt_rad: tilt(&pose.rotation),
+                },
+            );
+        }
+    }
+
+    /// The next tool pose waiting, by tick (none from the world before a reset).
+    fn take_tool(&mut self) -> Option<(i64, Isometry3<f64>)> {
+        loop {
+            let msg = self.tool.take()?;
+            let Ok((m, _)) = msg else { continue };
+            let Ok(pose) = geometry::isometry(&m.pose) else {
+                continue;
+            };
+            let tick = tick_of(m.header.stamp.seconds());
+            if let Some(before) = self.tool_before_reset {
+                if tick >= before {
+                    self.tool_before_reset = Some(tick);
+                    continue;
+                }
+                self.tool_before_reset = None;
+            }
+            return Some((tick, pose));
+        }
+    }
+
+    /// After the robot tipped over at `tipped_tick`: gives the whole-body node `next` (placed
+    /// around the start, where the reset puts the robot), waits until it has taken it, resets
+    /// the world (`/<robot>/reset`) and waits for the world's time to go back. Returns the
+    /// odometry since the reset; an error when the bridge cannot be reset.
+    fn reset_with(&mut self, next: &Target, tipped_tick: i64) -> Result<BTreeMap<i64, BaseSample>> {
+        // The node takes the next target before the reset, so that it drives to it from the
+        // reset's first tick and not to the target it fell on.
+        self.publish(next, None);
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while self.exactness.targets_accepted < self.sent {
+            self.check()?;
+            if Instant::now() > deadline {
+                bail!("the whole-body node did not report the next target within 20 s");
+            }
+            self.exactness.read(&self.diagnostics, self.robot);
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let service = topics::reset(self.robot);
+        let answer = self
+            .node
+            .trigger(&self.reset, &service, Duration::from_secs(20))
+            .map_err(anyhow::Error::msg)?;
+        if !answer.success {
+            bail!("{service}: {}", answer.message);
+        }
+        eprintln!("demo: {service}: {}", answer.message);
+        self.tool_before_reset = Some(tipped_tick);
+        // Whatever the old world sent after the tip is dropped: its odometry until time went
+        // back, its tool poses until the first one of the new world ([`Self::take_tool`]).
+        let mut odometry = BTreeMap::new();
+        let mut before = tipped_tick;
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while before != i64::MIN {
+            self.check()?;
+            if Instant::now() > deadline {
+                bail!("no odometry from the reset world within 20 s");
+            }
+            self.read(&mut odometry, Some(&mut before));
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        Ok(odometry)
+    }
+}
+
+/// Sends the targets one by one, each placed around where the base stands then, and records
+/// the run; returns the targets as sent. In lockstep the run is repeatable: a later target is
+/// stamped with the simulated time it starts at (the whole-body node waits for it) and placed
+/// around the base as it stood a fixed time before, and every sample pairs the tool pose and
+/// the odometry of the same tick. A robot that tilts past `tilt_limit_rad` has tipped over
+/// (the whole-body node stops driving it): the world is reset (`/<robot>/reset`) and the
+/// remaining targets go on from the start pose.
 #[allow(clippy::too_many_arguments)]
 fn drive(
     model: &kumi_model::RobotModel,
@@ -326,172 +649,82 @@ fn drive(
     shutdown: &AtomicBool,
     launched: &mut Launch,
 ) -> Result<Driven> {
-    let mut node = RosNode::new(&format!("/{robot}"), "demo", domain)?;
-    let publisher =
-        node.publisher::<PoseStamped>(&topics::robot_goal_pose(robot), qos::default())?;
-    let tool =
-        node.strict_subscription::<PoseStamped>(&topics::tool_pose(robot), qos::default())?;
-    let odom = node.strict_subscription::<Odometry>(&topics::odom(robot), qos::default())?;
-    let diagnostics =
-        node.strict_subscription::<DiagnosticArray>(topics::DIAGNOSTICS, qos::default())?;
-    let mut exactness = Exactness::default();
-    // Every node up: the whole-body node's and each arm node's outputs are discovered.
-    let mut outputs = vec![topics::tool_pose(robot)];
-    for m in model.modules.iter().filter(|m| m.ee_link.is_some()) {
-        outputs.push(topics::joint_increments(robot, &m.name));
-    }
-    let deadline = Instant::now() + Duration::from_secs(120);
-    while outputs.iter().any(|t| node.remote_publishers(t) == 0) {
-        if let Some((name, status)) = launched.exited() {
-            bail!("node `{name}` exited ({status}) during start-up; see the nodes' log");
-        }
-        if Instant::now() > deadline || shutdown.load(Ordering::Relaxed) {
-            bail!("the nodes did not come up within 120 s; see the nodes' log");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    std::thread::sleep(Duration::from_secs(1));
-    let frame = topics::odom_frame(robot);
-    let mut odometry = BTreeMap::new();
-    read_odometry(&odom, &mut odometry);
-    let schedule = Schedule::new(odometry.keys().last().copied().unwrap_or(0), seconds);
-    let end = schedule.begin(targets.len());
-    // The tool pose of each tick, by tick; odometry is paired with it at the end (the two
-    // topics arrive in either order).
-    let mut tool_poses: BTreeMap<i64, Isometry3<f64>> = BTreeMap::new();
-    let mut placed: Vec<Target> = Vec::new();
-    let mut sent_at = None::<Instant>;
-    // The tick at which the base tilted past the limit.
-    let mut tipped_at: Option<i64> = None;
-    let mut last_sample_at = Instant::now();
-    let mut late = std::collections::BTreeSet::new();
+    let mut peer = Peer::new(robot, domain, shutdown, launched)?;
+    peer.wait_for_nodes(model)?;
+    let mut run = Driven::default();
+    let (mut first, mut preplaced, mut odometry) = (0, None, BTreeMap::new());
+    // Where the robot starts, and where a reset puts it.
+    let mut start_xy = None;
+    // Simulated time before the current segment [s] (a reset sets the robot's back to zero).
+    let mut offset_s = 0.0;
     loop {
-        if shutdown.load(Ordering::Relaxed) {
-            bail!("interrupted");
+        let mut segment = peer.segment(
+            &targets[first..],
+            first,
+            seconds,
+            tilt_limit_rad,
+            preplaced.take(),
+            std::mem::take(&mut odometry),
+        )?;
+        let start = *start_xy.get_or_insert_with(|| {
+            segment
+                .samples
+                .first()
+                .map_or([0.0, 0.0], |s| [s.base[0], s.base[1]])
+        });
+        for s in &mut segment.samples {
+            s.t_s += offset_s;
         }
-        if let Some((name, status)) = launched.exited() {
-            bail!("node `{name}` exited ({status}); see the nodes' log");
-        }
-        read_odometry(&odom, &mut odometry);
-        exactness.read(&diagnostics, robot);
-        if let (None, Some(limit)) = (tipped_at, tilt_limit_rad) {
-            tipped_at = odometry
-                .range(schedule.start + 1..=end)
-                .find(|(_, b)| b.tilt_rad > limit)
-                .map(|(k, _)| *k);
-        }
-        // The next target, once the base pose it is placed around is known.
-        let next = placed.len();
-        if next < targets.len() && tipped_at.is_none() {
-            if let Some(base) = odometry
-                .range(schedule.placed_at(next)..)
-                .next()
-                .map(|(_, b)| b)
-            {
-                placed.push(place(&targets[next], [base.xy_yaw[0], base.xy_yaw[1]]));
-                sent_at = None;
-            }
-        }
-        // The latest target is sent until its ticks begin (a target sent before the
-        // whole-body node's subscription is matched would be lost); repeating it changes
-        // nothing. The first applies at once, a later one at its stamp.
-        let latest = tool_poses.keys().last().copied().unwrap_or(schedule.start);
-        if let Some(target) = placed.last() {
-            let i = placed.len() - 1;
-            let started = schedule.target_of(latest).is_some_and(|t| t >= i);
-            if !started && sent_at.is_none_or(|s| s.elapsed() > Duration::from_millis(500)) {
-                let stamp = (i > 0).then(|| schedule.begin(i) as f64 / TICKS_PER_S);
-                let _ = publisher.publish(target_msg(target, &frame, stamp));
-                sent_at = Some(Instant::now());
-            }
-        }
-        while let Some(msg) = tool.take() {
-            let Ok((m, _)) = msg else { continue };
-            let Ok(pose) = geometry::isometry(&m.pose) else {
-                continue;
-            };
-            let tick = tick_of(m.header.stamp.seconds());
-            let Some(i) = schedule.target_of(tick).filter(|_| tick <= end) else {
-                continue;
-            };
-            if i >= placed.len() {
-                if late.insert(i) {
-                    eprintln!(
-                        "target {}: not sent before its time (this process fell behind); it starts late, and this run will not repeat exactly",
-                        i + 1
-                    );
-                }
-                continue;
-            }
-            tool_poses.insert(tick, pose);
-            last_sample_at = Instant::now();
-            if tick == schedule.begin(i + 1) {
-                print_outcome(i, &placed[i], &pose, schedule.after_s(i, tick));
-            }
-        }
-        let last = tipped_at.unwrap_or(end);
-        if tool_poses.range(last..).next().is_some() {
+        offset_s = segment.samples.last().map_or(offset_s, |s| s.t_s);
+        run.placed.extend(segment.placed);
+        run.samples.extend(segment.samples);
+        let Some((i, tick)) = segment.tipped else {
             break;
-        }
-        if last_sample_at.elapsed() > Duration::from_secs(60) {
-            bail!(
-                "no tool pose from the whole-body node for 60 s (target {}); see the nodes' log",
-                placed.len()
-            );
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
-    // Every sample's odometry (sent before the tool pose of its tick, but maybe not yet here),
-    // and every node's counters once more (each node reports once a second).
-    let last = tipped_at.unwrap_or(end);
-    let waited = Instant::now();
-    while waited.elapsed() < Duration::from_millis(1200)
-        || odometry.range(last..).next().is_none() && waited.elapsed() < Duration::from_secs(5)
-    {
-        std::thread::sleep(Duration::from_millis(1));
-        read_odometry(&odom, &mut odometry);
-        exactness.read(&diagnostics, robot);
-    }
-    exactness.tell();
-    let samples: Vec<Sample> = tool_poses
-        .range(..=last)
-        .filter_map(|(&tick, pose)| {
-            let i = schedule.target_of(tick)?;
-            let base = odometry
-                .range(..=tick)
-                .next_back()
-                .map_or_else(BaseSample::default, |(_, b)| *b);
-            Some(Sample {
-                t_s: tick as f64 / TICKS_PER_S,
-                target: i,
-                base: base.xy_yaw,
-                tilt_rad: base.tilt_rad,
-                tool: *pose,
-            })
-        })
-        .collect();
-    let tipped = tipped_at.and_then(|tick| {
-        let i = schedule.target_of(tick)?;
-        let after_s = schedule.after_s(i, tick);
-        if let Some(s) = samples.last() {
-            print_outcome(i, &placed[i], &s.tool, after_s);
-        }
+        };
+        let target_start_s = run
+            .samples
+            .iter()
+            .find(|s| s.target == i)
+            .map_or(0.0, |s| s.t_s - 1.0 / TICKS_PER_S);
+        let after_s = offset_s - target_start_s;
+        let last = run.samples.last().expect("a tipped segment has samples");
+        print_outcome(i, &run.placed[i], &last.tool, after_s);
         eprintln!(
-            "target {}: the robot tipped over after {after_s:.1} s (tilt {:.3} rad, past the policy's {:.3}); the whole-body node stopped driving it, and {} more target(s) are not sent",
+            "target {}: the robot tipped over after {after_s:.1} s (tilt {:.3} rad, past the policy's {:.3}); the whole-body node stopped driving it",
             i + 1,
-            odometry[&tick].tilt_rad,
+            last.tilt_rad,
             tilt_limit_rad.unwrap_or(f64::NAN),
-            targets.len() - i - 1
         );
-        placed.truncate(i + 1);
-        Some(TippedOver { target: i, after_s })
-    });
-    Ok(Driven {
-        placed,
-        samples,
-        tipped,
-        inexact_ticks: exactness.total(),
-    })
+        run.tipped.push(TippedOver { target: i, after_s });
+        first = i + 1;
+        let Some(next) = targets.get(first) else {
+            break;
+        };
+        let next = place(next, start);
+        match peer.reset_with(&next, tick) {
+            Ok(after_reset) => {
+                odometry = after_reset;
+                preplaced = Some(next);
+            }
+            Err(e) => {
+                eprintln!(
+                    "demo: the world could not be reset ({e}); {} more target(s) are not sent",
+                    targets.len() - first
+                );
+                break;
+            }
+        }
+    }
+    peer.exactness.read(&peer.diagnostics, robot);
+    // Every node's counters once more (each node reports once a second).
+    let waited = Instant::now();
+    while waited.elapsed() < Duration::from_millis(1200) {
+        std::thread::sleep(Duration::from_millis(5));
+        peer.exactness.read(&peer.diagnostics, robot);
+    }
+    peer.exactness.tell();
+    run.inexact_ticks = peer.exactness.total();
+    Ok(run)
 }
 
 /// What a run did that breaks its exact repetition, from the nodes' `/diagnostics` counters:
@@ -502,6 +735,8 @@ fn drive(
 struct Exactness {
     /// Per node (status name): its latest value of each counter.
     counters: BTreeMap<String, BTreeMap<&'static str, u64>>,
+    /// The whole-body node's `targets_accepted`, as last reported.
+    targets_accepted: u64,
 }
 
 const INEXACT_COUNTERS: [&str; 3] = ["lockstep_timeouts", "late_goals", "unsynchronised_ticks"];
@@ -514,6 +749,11 @@ impl Exactness {
                 let id = &status.hardware_id;
                 if id != robot && !id.starts_with(&format!("{robot}/")) {
                     continue;
+                }
+                if id == robot && status.name.starts_with("kumi whole-body node") {
+                    if let Some(kv) = status.values.iter().find(|kv| kv.key == "targets_accepted") {
+                        self.targets_accepted = kv.value.parse().unwrap_or(0);
+                    }
                 }
                 let mine = self.counters.entry(status.name.clone()).or_default();
                 for kv in &status.values {
@@ -562,28 +802,6 @@ struct BaseSample {
     tilt_rad: f64,
 }
 
-/// Takes the odometry waiting, by tick.
-fn read_odometry(
-    odom: &kumi_ros::StrictSubscription<Odometry>,
-    odometry: &mut BTreeMap<i64, BaseSample>,
-) {
-    while let Some(msg) = odom.take() {
-        if let Ok((m, _)) = msg {
-            let Ok(pose) = geometry::isometry(&m.pose.pose) else {
-                continue;
-            };
-            let p = pose.translation.vector;
-            odometry.insert(
-                tick_of(m.header.stamp.seconds()),
-                BaseSample {
-                    xy_yaw: [p.x, p.y, tool_yaw(&pose.rotation)],
-                    tilt_rad: tilt(&pose.rotation),
-                },
-            );
-        }
-    }
-}
-
 /// Writes the CSV and the plot; prints the table (or the JSON object).
 fn report(
     robot: &str,
@@ -592,7 +810,7 @@ fn report(
     out: &std::path::Path,
     json: bool,
 ) -> Result<()> {
-    let (targets, samples, tipped) = (&run.placed, &run.samples, run.tipped.as_ref());
+    let (targets, samples, tipped) = (&run.placed, &run.samples, &run.tipped);
     let csv_path = out.join("run.csv");
     let mut csv = String::from(
         "t_s,target,target_x_m,target_y_m,target_z_m,target_yaw_rad,base_x_m,base_y_m,base_yaw_rad,base_tilt_rad,tool_x_m,tool_y_m,tool_z_m,tool_yaw_rad,position_error_m,yaw_error_rad\n",
@@ -642,7 +860,7 @@ fn report(
             position_error_m: p,
             yaw_error_rad: y,
             seconds: reached,
-            tipped_over_after_s: tipped.filter(|t| t.target == i).map(|t| t.after_s),
+            tipped_over_after_s: tipped.iter().find(|t| t.target == i).map(|t| t.after_s),
         });
     }
     std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
@@ -705,7 +923,7 @@ fn report(
         }
         if report.skipped > 0 {
             println!(
-                "{} target(s) not sent: the robot had tipped over",
+                "{} target(s) not sent: the robot had tipped over and the world could not be reset",
                 report.skipped
             );
         }

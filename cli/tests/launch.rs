@@ -557,30 +557,31 @@ fn demo(args: &[&str]) -> (serde_json::Value, String, String) {
 fn a_seeded_lockstep_demo_with_several_arm_nodes_repeats_its_csv_exactly() {
     let _one = one_at_a_time();
     // Dragon: two arm nodes and the whole-body node driving two wheel modules, each its own
-    // process; two targets, the second sent while the first runs and stamped with its start.
-    let args = ["dragon", "--targets", "2", "--seconds", "3", "--seed", "5"];
+    // process; three targets, each later one sent while the one before runs and stamped with
+    // its start. With this seed the shipped policy tips Dragon over on rapier during the
+    // second: the demo resets the world (/dragon/reset) and drives the third from the start.
+    let args = ["dragon", "--targets", "3", "--seconds", "4", "--seed", "3"];
     let (first, csv, _) = demo(&args);
     let (second, again, _) = demo(&args);
     println!("demo: {first}");
+    assert_eq!(first["skipped"], 0, "every target driven: {first}");
+    assert_eq!(first["inexact_ticks"], 0, "{first}");
     let rows: Vec<&str> = csv.lines().skip(1).collect();
-    let ticks = if first["skipped"] == 0 {
-        2 * 90
-    } else {
-        rows.len()
-    };
-    assert_eq!(rows.len(), ticks, "one row per control tick");
     for (k, row) in rows.iter().enumerate() {
         let t: f64 = row.split(',').next().unwrap().parse().unwrap();
-        assert!((t - (k + 1) as f64 / 30.0).abs() < 1e-3, "row {k} at {t} s");
+        assert!(
+            (t - (k + 1) as f64 / 30.0).abs() < 1e-3,
+            "row {k} at {t} s: one per tick"
+        );
     }
-    let switch = rows
-        .iter()
-        .position(|r| r.split(',').nth(1) == Some("2"))
-        .unwrap_or(rows.len());
-    assert!(
-        first["skipped"] != 0 || switch == 90,
-        "the second target drives from tick 91"
+    let target_of = |row: &str| row.split(',').nth(1).unwrap().to_string();
+    assert_eq!(target_of(rows[119]), "1");
+    assert_eq!(
+        target_of(rows[120]),
+        "2",
+        "the second target drives from tick 121"
     );
+    assert_eq!(target_of(rows.last().unwrap()), "3");
     for key in ["targets", "skipped"] {
         assert_eq!(
             first[key], second[key],
@@ -861,4 +862,43 @@ fn ros2_param_list_and_get_answer_every_nodes_settings_read_only() {
     assert_eq!(whole_body["lockstep"], true);
     assert_eq!(whole_body["tilt_limit_rad"], 0.6);
     assert_eq!(whole_body["skill.fingerprint"], arm["policy.fingerprint"]);
+}
+
+/// Issue 69, item 4: a robot is put back at its start by the sim bridge's reset
+/// (`std_srvs/srv/Trigger` on `/<robot>/reset`, called from rclpy as `ros2 service call` does);
+/// the nodes start over and the whole-body node drives to its target again.
+#[test]
+fn a_reset_puts_the_robot_back_at_its_start_and_the_nodes_start_over() {
+    let _one = one_at_a_time();
+    let domain = fresh_domain();
+    let _launch = launch(domain, &["minimal", "--lockstep"]);
+    let first = send_target(domain, "minimal", &[]);
+    assert!(number(&first["position_error_m"]) < 0.15, "{first}");
+    let out = peer(
+        domain,
+        &[
+            "reset",
+            "--robot",
+            "minimal",
+            "--drive-seconds",
+            "4",
+            "--timeout",
+            "30",
+        ],
+        Duration::from_secs(90),
+    );
+    println!("reset: {out}");
+    assert!(out.get("error").is_none(), "{out}");
+    assert_eq!(out["success"], true, "{out}");
+    let (before, after, later) = (&out["before"], &out["after"], &out["later"]);
+    assert!(number(&before["t"]) >= DRIVE_S, "{out}");
+    assert!(number(&after["t"]) < 0.1, "sim time starts over: {out}");
+    let xy = |p: &serde_json::Value| [number(&p["xyz"][0]), number(&p["xyz"][1])];
+    let [x0, y0] = xy(after);
+    assert!(x0.hypot(y0) < 0.02, "back at the start pose: {out}");
+    let [x1, y1] = xy(before);
+    assert!(x1.hypot(y1) > 0.3, "it had driven away: {out}");
+    // The whole-body node kept its target and drives to it again.
+    let [x2, y2] = xy(later);
+    assert!(x2.hypot(y2) > 0.3, "it drives again after the reset: {out}");
 }

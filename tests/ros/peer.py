@@ -895,6 +895,31 @@ def cmd_params(args, peer):
     }
 
 
+def cmd_reset(args, peer):
+    """Calls the sim bridge's reset (/<robot>/reset, std_srvs/srv/Trigger) as
+    `ros2 service call /<robot>/reset std_srvs/srv/Trigger` does, and reports the answer, the
+    odometry just before it, and the odometry --drive-seconds of sim time after it."""
+    from std_srvs.srv import Trigger
+    r = args.robot
+    odom = f"/{r}/odom"
+    peer.listen(Odometry, odom)
+    if peer.wait_for_new(odom, args.timeout) is None:
+        return {"error": "no odometry"}
+    def pose(m):
+        p = m.pose.pose.position
+        return {"t": stamp(m), "xyz": [p.x, p.y, p.z]}
+    before = pose(peer.latest[odom])
+    answer = call(peer, Trigger, f"/{r}/reset", Trigger.Request(), args.timeout)
+    first = peer.wait_for_new(odom, args.timeout, lambda m: stamp(m) < before["t"])
+    if first is None:
+        return {"error": "sim time did not go back", "success": answer.success, "message": answer.message}
+    after = pose(first)
+    later = peer.wait_for_new(odom, args.timeout + args.drive_seconds,
+                              lambda m: stamp(m) >= after["t"] + args.drive_seconds)
+    return {"success": answer.success, "message": answer.message, "before": before, "after": after,
+            "later": pose(later) if later else None}
+
+
 def cmd_latency(args, peer):
     """Median and p99 time from publishing increments to the first joint state that moves."""
     io = arm_io(args, peer)
@@ -955,6 +980,7 @@ def main():
             "malformed": cmd_malformed, "zerobyte": cmd_zerobyte, "rosout": cmd_rosout,
             "flood": cmd_flood, "target": cmd_target, "fakelimb": cmd_fakelimb,
             "diagnostics": cmd_diagnostics, "fakeodom": cmd_fakeodom, "params": cmd_params,
+            "reset": cmd_reset,
         }[args.command](args, peer)
         note(f"{args.command} done")
     except BaseException:

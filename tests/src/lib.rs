@@ -40,7 +40,7 @@ pub fn python() -> PathBuf {
         "no Python with rclpy at {}: run `bash .ci/run`, or create it with \
          `python3 -m venv target/rosvenv && target/rosvenv/bin/pip install ros-rclpy \
          ros-rmw-fastrtps-cpp ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-nav-msgs \
-         ros-rosgraph-msgs ros-diagnostic-msgs` (or set KUMI_ROS_PYTHON)",
+         ros-rosgraph-msgs ros-diagnostic-msgs ros-std-srvs` (or set KUMI_ROS_PYTHON)",
         path.display()
     );
     path

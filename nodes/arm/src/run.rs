@@ -390,6 +390,11 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
                 report.sim_restarts += 1;
                 schedule.forget();
                 prepared.controller.forget_state();
+                // A goal stamped on the old clock is not the new world's: the next goal is
+                // (with --wait-for-first-goal the node waits for it, as at start-up).
+                if goal_stamp.is_some_and(|g| g > t) {
+                    goal_stamp = None;
+                }
             }
         }
         let sim = match config.clock {

@@ -14,17 +14,18 @@ pub mod motion_stack;
 pub mod parameters;
 pub mod qos;
 pub mod rosout;
+pub mod services;
 pub mod strict;
 pub mod topics;
 mod warn;
 
+pub use ros2_client::Publisher;
 pub use strict::StrictSubscription;
 pub use warn::RateLimited;
 
 use kumi_msgs::RosMessage;
 use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions, Publisher, QosProfile,
-    Subscription,
+    Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions, QosProfile, Subscription,
 };
 
 /// Errors creating ROS entities.

@@ -44,6 +44,12 @@ pub fn imu(robot: &str) -> String {
     format!("/{robot}/imu")
 }
 
+/// `/<robot>/reset`: the sim bridge's `std_srvs/srv/Trigger` service that puts the robot back
+/// at its start pose, sim time back to zero.
+pub fn reset(robot: &str) -> String {
+    format!("/{robot}/reset")
+}
+
 /// `/<robot>/robot_description`: `std_msgs/String`, the URDF, latched.
 pub fn robot_description(robot: &str) -> String {
     format!("/{robot}/robot_description")

@@ -184,6 +184,14 @@ impl WholeBodyController {
         self.tipped_rad = None;
     }
 
+    /// A restarted simulator (its time went back): a new episode on the same target, as
+    /// training's reset starts one (no hold, the previous action zero, the wheels at rest).
+    pub fn start_over(&mut self) {
+        self.rearm();
+        self.previous_action.iter_mut().for_each(|a| *a = 0.0);
+        self.wheel_ramp.stop();
+    }
+
     /// The manipulator's tool pose in the odometry frame for a tick's state.
     pub fn tool_pose_w(&self, state: &Snapshot) -> Isometry3<f64> {
         let named = self

@@ -640,7 +640,7 @@ pub fn run(
                         if last_odom_stamp.is_some_and(|before| stamp < before) {
                             info!("odometry time went back (a restarted simulator); starting over");
                             report.sim_restarts += 1;
-                            controller.rearm();
+                            controller.start_over();
                             report.target_since_s = None;
                             tick.forget();
                         }

@@ -13,6 +13,7 @@ use kumi_msgs::rosgraph_msgs::Clock;
 use kumi_msgs::sensor_msgs::JointState;
 use kumi_msgs::std_msgs::{Float64, Float64MultiArray, Header, StringMsg};
 use kumi_ros::parameters::{ParameterValue, Settings};
+use kumi_ros::services::TriggerResponse;
 use kumi_ros::{qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_worlds::{Engine, SimConfig, SimError, SimWorld};
 use nalgebra::Vector3;
@@ -107,6 +108,8 @@ struct Counters {
     max_step_late_s: f64,
     /// The sim time [s] of the step after which the physics blew up ([`SimWorld::diverged`]).
     diverged_at_s: Option<f64>,
+    /// Times the world was reset (`/<robot>/reset`).
+    resets: u64,
 }
 
 /// The ROS side of the bridge: publishers, subscriptions.
@@ -428,6 +431,9 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
     refuse_duplicates(&node, &config)?;
     let io = open_io(&mut node, &config, &tree)?;
     let parameters = node.parameter_services(settings(&config, world.as_ref()))?;
+    let reset = node.trigger_server(&topics::reset(&config.robot))?;
+    // A reset under way: since when, the sim time it left [s], the request to answer.
+    let mut resetting = None;
     info!(
         robot = %config.robot,
         domain = node.domain_id(),
@@ -484,6 +490,63 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
 
     while !shutdown.load(Ordering::Relaxed) {
         parameters.poll();
+        // A reset: the robot back at its start pose, sim time back to zero (the nodes start
+        // over when they see time go back), lockstep waiting for the first commands again.
+        // The commands the nodes sent for the old world that are still on their way are
+        // dropped for RESET_GRACE before the new world's first state goes out.
+        while let Ok(Some((id, _))) = reset.receive_request() {
+            let at_s = sim_time_s(steps, control_dt);
+            match kumi_worlds::build(config.engine, model.clone(), SimConfig::for_model(&model)) {
+                Ok(fresh) => {
+                    world = fresh;
+                    commands = Commands::new(
+                        &model,
+                        &module_targets(world.as_ref(), &model),
+                        config.stale_after_s,
+                        world.config().control_hz,
+                    );
+                    lockstep = Lockstep::default();
+                    lockstep.require_first(config.first_step_waits_for.iter().cloned());
+                    steps = 0;
+                    last_linvel = world.base_twist_w().0;
+                    accel_w = Vector3::zeros();
+                    counters.diverged_at_s = None;
+                    counters.lockstep_silent.clear();
+                    counters.resets += 1;
+                    resetting = Some((Instant::now(), at_s, id));
+                }
+                Err(e) => {
+                    error!("reset refused: the world could not be built again: {e}");
+                    let answer = TriggerResponse {
+                        success: false,
+                        message: format!("the world could not be built again: {e}"),
+                    };
+                    let _ = reset.send_response(id, answer);
+                }
+            }
+        }
+        if let Some((since, at_s, id)) = resetting {
+            for inputs in &io.inputs {
+                drain(inputs, &mut malformed, &mut malformed_log);
+            }
+            if since.elapsed() < RESET_GRACE {
+                std::thread::sleep(Duration::from_millis(1));
+                continue;
+            }
+            resetting = None;
+            diag_window = (Instant::now(), 0);
+            (last_step_at, next_tick) = (Instant::now(), Instant::now());
+            publish_state(world.as_ref(), steps, &accel_w);
+            let message = format!("reset after {at_s:.3} s of sim time: the robot is back at its start pose, sim time at 0");
+            info!("{message}");
+            let _ = reset.send_response(
+                id,
+                TriggerResponse {
+                    success: true,
+                    message,
+                },
+            );
+        }
         let now_s = sim_time_s(steps, control_dt);
         // Commands.
         for inputs in &io.inputs {
@@ -575,7 +638,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             steps += 1;
             if world.diverged() && counters.diverged_at_s.is_none() {
                 let at_s = sim_time_s(steps, control_dt);
-                error!("the physics blew up at {at_s:.3} s of sim time: the simulated robot means nothing until the bridge restarts");
+                error!("the physics blew up at {at_s:.3} s of sim time: the simulated robot means nothing until a reset (/{}/reset) or a restart of the bridge", config.robot);
                 counters.diverged_at_s = Some(at_s);
             }
             let linvel = world.base_twist_w().0;
@@ -658,6 +721,11 @@ fn module_of(update: &Update) -> &str {
         Update::PositionTargets { module, .. } | Update::WheelVelocity { module, .. } => module,
     }
 }
+
+/// How long after a reset the bridge drops the commands still on their way for the old world
+/// before it publishes the new world's first state (the nodes answer a state within
+/// milliseconds; their answers to the old world's last one must not drive the new).
+const RESET_GRACE: Duration = Duration::from_millis(300);
 
 /// The bridge's sim time [s] after `steps` control steps of `control_dt` [s]: the clock it
 /// publishes, the stamp of every message and what it reports.
@@ -753,6 +821,10 @@ fn diagnostics(
                 .map(|t| format!("{t:.3}"))
                 .unwrap_or_default(),
         },
+        KeyValue {
+            key: "resets".into(),
+            value: counters.resets.to_string(),
+        },
     ];
     for kind in [
         "non_finite",
@@ -783,7 +855,7 @@ fn diagnostics(
             level,
             name: format!("kumi sim bridge: {}", config.robot),
             message: if let Some(t) = counters.diverged_at_s {
-                format!("the physics blew up at {t:.3} s: restart the bridge")
+                format!("the physics blew up at {t:.3} s: reset the world (/{}/reset) or restart the bridge", config.robot)
             } else if rejected > 0 {
                 format!("{rejected} commands rejected")
             } else {
