@@ -902,3 +902,40 @@ fn a_reset_puts_the_robot_back_at_its_start_and_the_nodes_start_over() {
     let [x2, y2] = xy(later);
     assert!(x2.hypot(y2) > 0.3, "it drives again after the reset: {out}");
 }
+
+/// Issue 69, item 2 (the part kumi can fix): the check that a node is the only one publishing
+/// its output leaves no reader behind, so no node lists itself as a subscriber of its own
+/// output in the ROS graph (as `ros2 topic info -v` shows it, from rclpy's graph).
+#[test]
+fn no_node_subscribes_to_its_own_output_in_the_ros_graph() {
+    let _one = one_at_a_time();
+    let domain = fresh_domain();
+    let _launch = launch(domain, &["minimal", "--lockstep"]);
+    let graph = |topic: &str| {
+        let out = peer(
+            domain,
+            &["graph", "--kind", topic, "--linger", "3"],
+            Duration::from_secs(60),
+        );
+        println!("{topic}: {out}");
+        let names = |key: &str| -> Vec<String> {
+            out[key]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_str().unwrap().to_string())
+                .collect()
+        };
+        (names("publishers"), names("subscribers"))
+    };
+    let (publishers, subscribers) = graph("/minimal/tool_pose");
+    assert_eq!(publishers, vec!["/minimal/whole_body".to_string()]);
+    assert!(subscribers.is_empty(), "{subscribers:?}");
+    let (publishers, subscribers) = graph("/minimal/arm0/joint_increments");
+    assert_eq!(publishers, vec!["/minimal/arm0/arm_node".to_string()]);
+    assert!(
+        !subscribers.iter().any(|s| s.contains("arm_node")),
+        "{subscribers:?}"
+    );
+    assert!(subscribers.contains(&"/minimal/sim_bridge".to_string()));
+}

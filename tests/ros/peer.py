@@ -920,6 +920,16 @@ def cmd_reset(args, peer):
             "later": pose(later) if later else None}
 
 
+def cmd_graph(args, peer):
+    """What `ros2 topic info -v` shows of the topic --kind: each publisher's and subscriber's
+    node, once discovery has settled (--linger seconds)."""
+    peer.spin_until(lambda: False, args.linger)
+    def endpoints(infos):
+        return [f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos]
+    return {"publishers": endpoints(peer.get_publishers_info_by_topic(args.kind)),
+            "subscribers": endpoints(peer.get_subscriptions_info_by_topic(args.kind))}
+
+
 def cmd_latency(args, peer):
     """Median and p99 time from publishing increments to the first joint state that moves."""
     io = arm_io(args, peer)
@@ -980,7 +990,7 @@ def main():
             "malformed": cmd_malformed, "zerobyte": cmd_zerobyte, "rosout": cmd_rosout,
             "flood": cmd_flood, "target": cmd_target, "fakelimb": cmd_fakelimb,
             "diagnostics": cmd_diagnostics, "fakeodom": cmd_fakeodom, "params": cmd_params,
-            "reset": cmd_reset,
+            "reset": cmd_reset, "graph": cmd_graph,
         }[args.command](args, peer)
         note(f"{args.command} done")
     except BaseException:

@@ -23,7 +23,7 @@ use kumi_ros::parameters::{ParameterValue, Settings};
 use kumi_ros::{geometry, qos, topics, RateLimited, RosError, RosNode, StrictSubscription};
 use kumi_runtime::{BackendChoice, RuntimeError, SkillPolicy};
 use nalgebra::Isometry3;
-use ros2_client::{Gid, Publisher};
+use ros2_client::Publisher;
 use tracing::{debug, info, warn};
 
 use crate::controller::{ArmController, Hold};
@@ -188,34 +188,6 @@ struct Io {
 /// Messages taken per subscription per loop: a flood cannot keep the node from acting.
 const MAX_TAKEN: usize = 1000;
 
-fn writers<M: kumi_msgs::RosMessage>(sub: &StrictSubscription<M>) -> Vec<Gid> {
-    (0..MAX_TAKEN)
-        .map_while(|_| sub.take())
-        .filter_map(|taken| taken.ok().map(|(_, writer)| writer))
-        .collect()
-}
-
-/// Listens on the node's own output topic: who else sends this module's commands.
-type Listener = Box<dyn FnMut() -> Vec<Gid>>;
-
-fn listen_to_own_output(
-    node: &mut RosNode,
-    output: Output,
-    topic: &str,
-) -> Result<Listener, ArmNodeError> {
-    Ok(match output {
-        Output::Increments => {
-            let sub = node.strict_subscription::<Float64MultiArray>(topic, qos::default())?;
-            Box::new(move || writers(&sub))
-        }
-        Output::JointSet => {
-            let sub = node.strict_subscription::<JointState>(topic, qos::default())?;
-            Box::new(move || writers(&sub))
-        }
-    })
-}
-
-/// Publishes the node's diagnostics once a second.
 /// The node's settings, as its read-only ROS parameters
 /// (`ros2 param list /<robot>/<module>/arm_node`).
 fn settings(config: &ArmNodeConfig, output: Output) -> Settings {
@@ -245,6 +217,7 @@ fn settings(config: &ArmNodeConfig, output: Output) -> Settings {
     s
 }
 
+/// Publishes the node's diagnostics once a second.
 fn publish_report(
     io: &Io,
     report_at: &mut Instant,
@@ -307,7 +280,6 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
         module: module.to_string(),
         topic: output_topic.clone(),
     };
-    let mut heard = listen_to_own_output(&mut node, output, &output_topic)?;
     let io = Io {
         goal: node.strict_subscription(&topics::goal_pose(robot, module), qos::default())?,
         joint_states: node.strict_subscription(&joint_states_topic, qos::default())?,
@@ -330,15 +302,22 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     };
     // Another node commanding this module now: refuse to be the second. (One that DDS still
     // lists but that sends nothing, such as a node killed with SIGKILL, is no reason to.)
-    let deadline = Instant::now() + config.duplicate_check;
-    while Instant::now() < deadline {
-        if heard().into_iter().any(|w| w != own) {
-            return Err(duplicate());
+    let others = match output {
+        Output::Increments => {
+            node.others_publish::<Float64MultiArray>(&output_topic, own, config.duplicate_check)?
         }
-        std::thread::sleep(Duration::from_millis(20));
+        Output::JointSet => {
+            node.others_publish::<JointState>(&output_topic, own, config.duplicate_check)?
+        }
+    };
+    if others {
+        return Err(duplicate());
     }
+    // The writers on the output already known (those of killed nodes among them): only a
+    // writer that appears later is another sender of this module's commands.
+    let mut known_writers = node.remote_writers(&output_topic);
+    let mut writers_at = Instant::now();
     let parameters = node.parameter_services(settings(&config, output))?;
-    let mut warned_about = std::collections::BTreeSet::new();
     info!(
         "arm node up: /{robot}/{module}, joint states from {joint_states_topic}, output {output:?} on {output_topic}, clock {:?}, domain {}",
         config.clock,
@@ -363,10 +342,13 @@ pub fn run(config: ArmNodeConfig, shutdown: Arc<AtomicBool>) -> Result<(), ArmNo
     while !shutdown.load(Ordering::Relaxed) {
         parameters.poll();
         // Someone who started commanding this module later (a second arm node refuses to
-        // start when it hears this one; `ros2 topic pub` does not).
-        for writer in heard() {
-            if writer != own && warned_about.insert(writer) {
-                warn!("{module}: another publisher also sends this module's commands on {output_topic}");
+        // start when it hears this one; `ros2 topic pub` does not), as discovery finds them.
+        if writers_at.elapsed() >= Duration::from_secs(1) {
+            writers_at = Instant::now();
+            for writer in node.remote_writers(&output_topic) {
+                if known_writers.insert(writer) {
+                    warn!("{module}: another publisher also sends this module's commands on {output_topic}");
+                }
             }
         }
         for taken in (0..MAX_TAKEN).map_while(|_| io.clock.take()) {

@@ -25,7 +25,8 @@ pub use warn::RateLimited;
 
 use kumi_msgs::RosMessage;
 use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, NodeName, NodeOptions, QosProfile, Subscription,
+    Context, ContextOptions, Gid, MessageTypeName, Name, NodeName, NodeOptions, QosProfile,
+    Subscription,
 };
 
 /// Errors creating ROS entities.
@@ -112,13 +113,53 @@ impl RosNode {
     /// DDS discovery knows them now (discovery takes a moment after start-up). Read from the
     /// participant, not from ros2-client's graph, which only updates while its spinner runs.
     pub fn remote_publishers(&self, full_name: &str) -> usize {
+        self.remote_writers(full_name).len()
+    }
+
+    /// The writers of other participants on the absolute topic `full_name` that DDS discovery
+    /// knows now ([`Self::remote_publishers`]), by id. A writer of a node killed without
+    /// saying goodbye stays listed until its lease runs out.
+    pub fn remote_writers(&self, full_name: &str) -> std::collections::BTreeSet<Gid> {
         let dds_name = format!("rt{full_name}");
         self.context
             .domain_participant()
             .discovered_writers()
             .iter()
             .filter(|w| w.publication_topic_data.topic_name == dds_name)
-            .count()
+            .map(|w| Gid::from(w.writer_proxy.remote_writer_guid))
+            .collect()
+    }
+
+    /// Whether a node other than this one sends samples of `M` on the absolute topic
+    /// `full_name` within `wait` (samples from `own`, this node's writer, do not count). The
+    /// listening is done by a short-lived node of its own, `<name>_startup_check`, so that no
+    /// reader is left on the topic afterwards (a node checking that it is the only one
+    /// publishing its output must not appear as its own subscriber). A node discovery still
+    /// lists but that sends nothing, such as one killed with SIGKILL, does not count.
+    pub fn others_publish<M: RosMessage>(
+        &self,
+        full_name: &str,
+        own: Gid,
+        wait: std::time::Duration,
+    ) -> Result<bool, RosError> {
+        let fqn = self.node.fully_qualified_name();
+        let name = fqn.rsplit('/').next().unwrap_or_default();
+        let mut check = RosNode::new(
+            self.node.namespace(),
+            &format!("{name}_startup_check"),
+            self.domain_id(),
+        )?;
+        let listener = check.strict_subscription::<M>(full_name, qos::default())?;
+        let deadline = std::time::Instant::now() + wait;
+        while std::time::Instant::now() < deadline {
+            while let Some(taken) = listener.take() {
+                if matches!(taken, Ok((_, writer)) if writer != own) {
+                    return Ok(true);
+                }
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        Ok(false)
     }
 
     fn topic<M: RosMessage>(

@@ -411,23 +411,16 @@ fn publish_goals(io: &Io, decision: &Decision, stamp: Time, odom_frame: &str) {
 
 /// Refuses to start when another whole-body node already publishes this robot's tool pose.
 fn refuse_duplicates(
-    node: &mut RosNode,
+    node: &RosNode,
     config: &WholeBodyNodeConfig,
     own: ros2_client::Gid,
 ) -> Result<(), WholeBodyNodeError> {
     let topic = topics::tool_pose(&config.robot);
-    let listener = node.strict_subscription::<PoseStamped>(&topic, qos::default())?;
-    let deadline = Instant::now() + config.duplicate_check;
-    while Instant::now() < deadline {
-        while let Some(taken) = listener.take() {
-            if matches!(taken, Ok((_, writer)) if writer != own) {
-                return Err(WholeBodyNodeError::Duplicate {
-                    robot: config.robot.clone(),
-                    topic,
-                });
-            }
-        }
-        std::thread::sleep(Duration::from_millis(20));
+    if node.others_publish::<PoseStamped>(&topic, own, config.duplicate_check)? {
+        return Err(WholeBodyNodeError::Duplicate {
+            robot: config.robot.clone(),
+            topic,
+        });
     }
     Ok(())
 }
@@ -536,7 +529,7 @@ pub fn run(
     )?;
     let mut steering = SteeringRates::new(&config.model);
     let io = open_io(&mut node, &config, &controller, &steering)?;
-    refuse_duplicates(&mut node, &config, io.tool_pose.gid())?;
+    refuse_duplicates(&node, &config, io.tool_pose.gid())?;
     let parameters = node.parameter_services(settings(&config, &controller))?;
     // Targets and the tool pose are in the odometry's frame: `<robot>/odom` from the sim
     // bridge, whatever the odometry says on hardware.
