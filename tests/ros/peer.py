@@ -15,6 +15,7 @@ import threading
 import time
 
 import rclpy
+import rclpy.executors
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -930,6 +931,49 @@ def cmd_graph(args, peer):
             "subscribers": endpoints(peer.get_subscriptions_info_by_topic(args.kind))}
 
 
+def cmd_once(args, peer):
+    """What `ros2 topic pub --once` does, --count times: each time a node of its own in a
+    context of its own (a new DDS participant, as a new process has), a publisher with the
+    command's QoS (reliable, volatile, keep last 1), a wait for one matched subscription, one
+    sample, 0.1 s alive (--within S: S), gone. Sends --goal to /<robot>/goal_pose and reports how many the
+    whole-body node counted (`targets_accepted` on /diagnostics) before and after."""
+    r = args.robot
+    name = f"kumi whole-body node: {r}"
+    statuses = latest_diagnostics(peer)
+    if not peer.spin_until(lambda: name in statuses, args.timeout):
+        return {"error": "no diagnostics from the whole-body node"}
+    before = int(statuses[name]["targets_accepted"])
+    x, y, z, yaw = [float(v) for v in args.goal.split(",")]
+    msg = goal_msg([x, y, z, math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)], f"{r}/odom")
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+    unmatched = 0
+    for k in range(args.count):
+        context = rclpy.Context()
+        rclpy.init(context=context)
+        node = rclpy.create_node(f"kumi_once_{k}", context=context)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        publisher = node.create_publisher(PoseStamped, f"/{r}/goal_pose", qos)
+        deadline = time.monotonic() + args.timeout
+        while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        if publisher.get_subscription_count() == 0:
+            unmatched += 1
+        publisher.publish(msg)
+        end = time.monotonic() + (args.within or 0.1)
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.02)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    statuses.clear()
+    peer.spin_until(lambda: False, 3.0)
+    peer.spin_until(lambda: name in statuses, args.timeout)
+    after = int(statuses.get(name, {}).get("targets_accepted", before))
+    return {"sent": args.count, "unmatched": unmatched, "arrived": after - before}
+
+
 def cmd_latency(args, peer):
     """Median and p99 time from publishing increments to the first joint state that moves."""
     io = arm_io(args, peer)
@@ -990,7 +1034,7 @@ def main():
             "malformed": cmd_malformed, "zerobyte": cmd_zerobyte, "rosout": cmd_rosout,
             "flood": cmd_flood, "target": cmd_target, "fakelimb": cmd_fakelimb,
             "diagnostics": cmd_diagnostics, "fakeodom": cmd_fakeodom, "params": cmd_params,
-            "reset": cmd_reset, "graph": cmd_graph,
+            "reset": cmd_reset, "graph": cmd_graph, "once": cmd_once,
         }[args.command](args, peer)
         note(f"{args.command} done")
     except BaseException:
