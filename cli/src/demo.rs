@@ -314,7 +314,6 @@ struct Driven {
 
 /// The demo's node: what it sends, what it watches.
 struct Peer<'a> {
-    node: RosNode,
     publisher: Publisher<PoseStamped>,
     tool: kumi_ros::StrictSubscription<PoseStamped>,
     odom: kumi_ros::StrictSubscription<Odometry>,
@@ -330,6 +329,8 @@ struct Peer<'a> {
     robot: &'a str,
     shutdown: &'a AtomicBool,
     launched: &'a mut Launch,
+    // Last: dropped after its publisher and subscriptions.
+    node: RosNode,
 }
 
 /// One stretch of simulated time without a reset: the targets it drove, the samples, and
