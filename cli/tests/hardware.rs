@@ -188,6 +188,12 @@ fn a_launch_on_hardware_drives_fake_motion_stack_limbs_from_a_target() {
         "no sim bridge: {}",
         launch.log()
     );
+    // The node takes targets in the odometry's frame once it has heard the odometry.
+    assert!(
+        launch.wait_for_log("odometry in frame `odom`", Duration::from_secs(30)),
+        "{}",
+        launch.log()
+    );
     // A target within the arm's reach of the standing base, in the odometry's frame.
     let out = peer(
         domain,

@@ -626,8 +626,12 @@ pub fn run(
                 None => break,
                 Some(Ok((msg, _))) => match base_state(&msg) {
                     Some(base) => {
-                        if config.hardware.is_some() && !msg.header.frame_id.is_empty() {
+                        if config.hardware.is_some()
+                            && !msg.header.frame_id.is_empty()
+                            && msg.header.frame_id != odom_frame
+                        {
                             odom_frame.clone_from(&msg.header.frame_id);
+                            info!("odometry in frame `{odom_frame}`: targets are taken in it");
                         }
                         let stamp = msg.header.stamp;
                         if last_odom_stamp.is_some_and(|before| stamp < before) {
