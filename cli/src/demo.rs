@@ -322,8 +322,9 @@ struct Peer<'a> {
     exactness: Exactness,
     /// Target messages published so far.
     sent: u64,
-    /// After a reset, until the first tool pose of the new world: the tick of the latest one of
-    /// the old (the whole-body node's may still be on their way).
+    /// After a reset, until the first odometry and tool pose of the new world: the tick of the
+    /// latest of the old world ([`from_new_world`]; the old world's may still be on their way).
+    odom_before_reset: Option<i64>,
     tool_before_reset: Option<i64>,
     frame: String,
     robot: &'a str,
@@ -360,6 +361,7 @@ impl<'a> Peer<'a> {
             node,
             exactness: Exactness::default(),
             sent: 0,
+            odom_before_reset: None,
             tool_before_reset: None,
             frame: topics::odom_frame(robot),
             robot,
@@ -424,7 +426,7 @@ impl<'a> Peer<'a> {
         let start = match preplaced {
             Some(_) => odometry.keys().next().copied(),
             None => {
-                self.read(&mut odometry, None);
+                self.read(&mut odometry);
                 odometry.keys().last().copied()
             }
         };
@@ -440,7 +442,7 @@ impl<'a> Peer<'a> {
         let mut late = std::collections::BTreeSet::new();
         loop {
             self.check()?;
-            self.read(&mut odometry, None);
+            self.read(&mut odometry);
             if let (None, Some(limit)) = (tipped_at, tilt_limit_rad) {
                 tipped_at = odometry
                     .range(schedule.start + 1..=end)
@@ -505,7 +507,7 @@ impl<'a> Peer<'a> {
         let waited = Instant::now();
         while odometry.range(last..).next().is_none() && waited.elapsed() < Duration::from_secs(5) {
             std::thread::sleep(Duration::from_millis(1));
-            self.read(&mut odometry, None);
+            self.read(&mut odometry);
         }
         let samples = tool_poses
             .range(..=last)
@@ -536,26 +538,17 @@ impl<'a> Peer<'a> {
         })
     }
 
-    /// Takes the odometry and the nodes' reports waiting; with `after` (a reset at that tick),
-    /// only odometry from after time went back.
-    fn read(&mut self, odometry: &mut BTreeMap<i64, BaseSample>, after: Option<&mut i64>) {
+    /// Takes the odometry (none from the world before a reset) and the nodes' reports waiting.
+    fn read(&mut self, odometry: &mut BTreeMap<i64, BaseSample>) {
         self.exactness.read(&self.diagnostics, self.robot);
-        let mut after = after;
         while let Some(msg) = self.odom.take() {
             let Ok((m, _)) = msg else { continue };
             let Ok(pose) = geometry::isometry(&m.pose.pose) else {
                 continue;
             };
             let tick = tick_of(m.header.stamp.seconds());
-            if let Some(before) = after.as_deref_mut() {
-                if tick >= *before {
-                    // Still the world before the reset.
-                    *before = tick;
-                    continue;
-                }
-                // Time went back: the new world, from here on.
-                *before = i64::MIN;
-                after = None;
+            if !from_new_world(&mut self.odom_before_reset, tick) {
+                continue;
             }
             let p = pose.translation.vector;
             odometry.insert(
@@ -577,14 +570,9 @@ impl<'a> Peer<'a> {
                 continue;
             };
             let tick = tick_of(m.header.stamp.seconds());
-            if let Some(before) = self.tool_before_reset {
-                if tick >= before {
-                    self.tool_before_reset = Some(tick);
-                    continue;
-                }
-                self.tool_before_reset = None;
+            if from_new_world(&mut self.tool_before_reset, tick) {
+                return Some((tick, pose));
             }
-            return Some((tick, pose));
         }
     }
 
@@ -614,18 +602,18 @@ impl<'a> Peer<'a> {
             bail!("{service}: {}", answer.message);
         }
         eprintln!("demo: {service}: {}", answer.message);
+        // Whatever the old world sent after the tip is dropped: its odometry and its tool
+        // poses until time went back.
+        self.odom_before_reset = Some(tipped_tick);
         self.tool_before_reset = Some(tipped_tick);
-        // Whatever the old world sent after the tip is dropped: its odometry until time went
-        // back, its tool poses until the first one of the new world ([`Self::take_tool`]).
         let mut odometry = BTreeMap::new();
-        let mut before = tipped_tick;
         let deadline = Instant::now() + Duration::from_secs(20);
-        while before != i64::MIN {
+        while odometry.is_empty() {
             self.check()?;
             if Instant::now() > deadline {
                 bail!("no odometry from the reset world within 20 s");
             }
-            self.read(&mut odometry, Some(&mut before));
+            self.read(&mut odometry);
             std::thread::sleep(Duration::from_millis(1));
         }
         Ok(odometry)
@@ -716,7 +704,6 @@ fn drive(
             }
         }
     }
-    peer.exactness.read(&peer.diagnostics, robot);
     // Every node's counters once more (each node reports once a second).
     let waited = Instant::now();
     while waited.elapsed() < Duration::from_millis(1200) {
@@ -726,6 +713,24 @@ fn drive(
     peer.exactness.tell();
     run.inexact_ticks = peer.exactness.total();
     Ok(run)
+}
+
+/// Whether a message stamped `tick` is from the world after a reset, `before` holding the
+/// latest tick of the world before it (`None`: no reset pending). One topic's messages arrive
+/// in order, so the first one whose time went back, and every one after it, is the new
+/// world's. Pure.
+fn from_new_world(before: &mut Option<i64>, tick: i64) -> bool {
+    match *before {
+        Some(old) if tick >= old => {
+            *before = Some(tick);
+            false
+        }
+        Some(_) => {
+            *before = None;
+            true
+        }
+        None => true,
+    }
 }
 
 /// What a run did that breaks its exact repetition, from the nodes' `/diagnostics` counters:
@@ -969,6 +974,22 @@ mod tests {
         let short = Schedule::new(5, 0.01);
         assert_eq!((short.n, short.lead), (2, 1), "at least two ticks a target");
         assert_eq!(short.target_of(7), Some(0));
+    }
+
+    #[test]
+    fn after_a_reset_only_messages_from_after_time_went_back_count() {
+        let mut before = Some(57);
+        assert!(!from_new_world(&mut before, 57));
+        assert!(
+            !from_new_world(&mut before, 300),
+            "the old world ran on after the tip"
+        );
+        assert!(from_new_world(&mut before, 0), "time went back");
+        assert!(
+            from_new_world(&mut before, 400),
+            "and the new world's time runs on"
+        );
+        assert_eq!(before, None);
     }
 
     #[test]

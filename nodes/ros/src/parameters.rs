@@ -18,9 +18,9 @@ use ros2_client::rcl_interfaces::{
     ListParametersResponse, ListParametersResult, SetParametersAtomicallyResponse,
     SetParametersRequest, SetParametersResponse,
 };
-use ros2_client::{Name, Server, ServiceMapping, ServiceTypeName};
+use ros2_client::Server;
 
-use crate::{create_error, qos, RosError};
+use crate::RosError;
 
 /// Why a set request is refused.
 pub const READ_ONLY: &str =
@@ -201,21 +201,12 @@ where
     Req: ros2_client::Message + Clone + 'static,
     Resp: ros2_client::Message + 'static,
 {
-    let full_name = format!("{fqn}/{service}");
-    let name = Name::new(fqn, service).map_err(|e| RosError::BadName {
-        name: full_name.clone(),
-        reason: format!("{e:?}"),
-    })?;
-    // rmw_fastrtps's mapping (what rclpy from PyPI runs), with its services' QoS: reliable,
-    // volatile, keep last 10.
-    node.create_server(
-        ServiceMapping::Enhanced,
-        &name,
-        &ServiceTypeName::new("rcl_interfaces", type_name),
-        qos::default(),
-        qos::default(),
+    crate::services::server(
+        node,
+        &format!("{fqn}/{service}"),
+        "rcl_interfaces",
+        type_name,
     )
-    .map_err(create_error("service", &full_name))
 }
 
 #[cfg(test)]

@@ -36,30 +36,44 @@ fn service_name(full_name: &str) -> Result<Name, RosError> {
     })
 }
 
-impl RosNode {
-    /// A `std_srvs/srv/Trigger` server on the absolute service name `full_name`.
-    pub fn trigger_server(&mut self, full_name: &str) -> Result<TriggerServer, RosError> {
-        let name = service_name(full_name)?;
-        self.node
-            .create_server(
-                ServiceMapping::Enhanced,
-                &name,
-                &ServiceTypeName::new("std_srvs", "Trigger"),
-                qos::default(),
-                qos::default(),
-            )
-            .map_err(create_error("service", full_name))
-    }
+/// How kumi serves and calls every service: rmw_fastrtps's request/reply mapping (what rclpy
+/// from PyPI runs), with its services' QoS (reliable, volatile, keep last 10).
+const MAPPING: ServiceMapping = ServiceMapping::Enhanced;
+
+/// A server of the service type `package/type_name` on the absolute name `full_name`.
+pub(crate) fn server<Req, Resp>(
+    node: &mut ros2_client::Node,
+    full_name: &str,
+    package: &str,
+    type_name: &str,
+) -> Result<Server<Req, Resp>, RosError>
+where
+    Req: Message + Clone + 'static,
+    Resp: Message + 'static,
+{
+    let service_type = ServiceTypeName::new(package, type_name);
+    node.create_server(
+        MAPPING,
+        &service_name(full_name)?,
+        &service_type,
+        qos::default(),
+        qos::default(),
+    )
+    .map_err(create_error("service", full_name))
 }
 
 impl RosNode {
+    /// A `std_srvs/srv/Trigger` server on the absolute service name `full_name`.
+    pub fn trigger_server(&mut self, full_name: &str) -> Result<TriggerServer, RosError> {
+        server(&mut self.node, full_name, "std_srvs", "Trigger")
+    }
+
     /// A `std_srvs/srv/Trigger` client of the absolute service name `full_name`.
     pub fn trigger_client(&mut self, full_name: &str) -> Result<TriggerClient, RosError> {
-        let name = service_name(full_name)?;
         self.node
             .create_client(
-                ServiceMapping::Enhanced,
-                &name,
+                MAPPING,
+                &service_name(full_name)?,
                 &ServiceTypeName::new("std_srvs", "Trigger"),
                 qos::default(),
                 qos::default(),

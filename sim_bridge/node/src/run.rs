@@ -444,14 +444,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
         world.config().label_for(config.engine)
     );
 
-    let mut commands = Commands::new(
-        &model,
-        &module_targets(world.as_ref(), &model),
-        config.stale_after_s,
-        world.config().control_hz,
-    );
-    let mut lockstep = Lockstep::default();
-    lockstep.require_first(config.first_step_waits_for.iter().cloned());
+    let (mut commands, mut lockstep) = fresh_start(world.as_ref(), &config);
     let mut waiting_log = RateLimited::new(Duration::from_secs(5));
     let mut counters = Counters::default();
     let mut malformed = 0_u64;
@@ -499,14 +492,7 @@ pub fn run(config: BridgeConfig, shutdown: Arc<AtomicBool>) -> Result<(), Bridge
             match kumi_worlds::build(config.engine, model.clone(), SimConfig::for_model(&model)) {
                 Ok(fresh) => {
                     world = fresh;
-                    commands = Commands::new(
-                        &model,
-                        &module_targets(world.as_ref(), &model),
-                        config.stale_after_s,
-                        world.config().control_hz,
-                    );
-                    lockstep = Lockstep::default();
-                    lockstep.require_first(config.first_step_waits_for.iter().cloned());
+                    (commands, lockstep) = fresh_start(world.as_ref(), &config);
                     steps = 0;
                     last_linvel = world.base_twist_w().0;
                     accel_w = Vector3::zeros();
@@ -720,6 +706,22 @@ fn module_of(update: &Update) -> &str {
     match update {
         Update::PositionTargets { module, .. } | Update::WheelVelocity { module, .. } => module,
     }
+}
+
+/// The commands and the lockstep gate of a world at its start (the bridge's, and after each
+/// reset): every module holding where it stands, nothing received, the first step waiting for
+/// the modules the config names.
+fn fresh_start(world: &dyn SimWorld, config: &BridgeConfig) -> (Commands, Lockstep) {
+    let model = &config.model;
+    let commands = Commands::new(
+        model,
+        &module_targets(world, model),
+        config.stale_after_s,
+        world.config().control_hz,
+    );
+    let mut lockstep = Lockstep::default();
+    lockstep.require_first(config.first_step_waits_for.iter().cloned());
+    (commands, lockstep)
 }
 
 /// How long after a reset the bridge drops the commands still on their way for the old world
