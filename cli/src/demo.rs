@@ -18,6 +18,7 @@ use kumi_msgs::diagnostic_msgs::DiagnosticArray;
 use kumi_msgs::geometry_msgs::PoseStamped;
 use kumi_msgs::nav_msgs::Odometry;
 use kumi_msgs::std_msgs::Header;
+use kumi_recorder::{Recorder, RecordingThread};
 use kumi_ros::services::TriggerClient;
 use kumi_ros::{geometry, qos, topics, Publisher, RosNode};
 use kumi_terms::observation::{target_errors, tool_yaw, Target};
@@ -61,9 +62,14 @@ pub struct DemoArgs {
     #[arg(long)]
     pub engine: Option<String>,
     /// One JSON object on stdout: {robot, targets: [{target: [x, y, z, yaw], position_error_m,
-    /// yaw_error_rad, seconds, tipped_over_after_s}], skipped, inexact_ticks, plot, csv}.
+    /// yaw_error_rad, seconds, tipped_over_after_s}], skipped, inexact_ticks, plot, csv,
+    /// recording: {file, topics: [{topic, type, messages}]} or null}.
     #[arg(long)]
     pub json: bool,
+    /// Record every topic of the run to <out>/<robot>.mcap (`kumi record`; MCAP as rosbag2
+    /// writes it, for Foxglove and `ros2 bag`), from before the first target to the end.
+    #[arg(long)]
+    pub record: bool,
 }
 
 /// Where targets are drawn: within `xy_m` of the robot's base along x and y, height in `z_m`.
@@ -139,6 +145,48 @@ struct Report {
     inexact_ticks: u64,
     plot: String,
     csv: String,
+    recording: Option<Recording>,
+}
+
+/// A run's recording ([`DemoArgs::record`]).
+#[derive(serde::Serialize)]
+struct Recording {
+    file: String,
+    topics: Vec<RecordedTopic>,
+}
+
+#[derive(serde::Serialize)]
+struct RecordedTopic {
+    topic: String,
+    #[serde(rename = "type")]
+    ros_type: String,
+    messages: u64,
+}
+
+/// Starts recording the run into `<out>/<robot>.mcap`, replacing an earlier run's.
+fn start_recording(out: &std::path::Path, robot: &str, domain: u16) -> Result<RecordingThread> {
+    let file = crate::record::file_in(out, robot);
+    if file.exists() {
+        std::fs::remove_file(&file).with_context(|| format!("removing {}", file.display()))?;
+    }
+    Ok(Recorder::create(robot, domain, &file)?.spawn())
+}
+
+/// Stops the recording and says what it holds.
+fn finish_recording(recording: RecordingThread, file: std::path::PathBuf) -> Result<Recording> {
+    let topics = recording.stop()?;
+    eprintln!("demo: {}", crate::record::summary(&file, &topics));
+    Ok(Recording {
+        file: file.display().to_string(),
+        topics: topics
+            .into_iter()
+            .map(|t| RecordedTopic {
+                topic: t.topic,
+                ros_type: t.ros_type,
+                messages: t.messages,
+            })
+            .collect(),
+    })
 }
 
 /// A target as `/<robot>/goal_pose` takes it; stamped with the simulated time [s] it starts
@@ -176,6 +224,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         backend: Some("tract".into()),
         hardware: None,
         profile: None,
+        record: None,
     };
     let policy = launch::check_policy(&model, &launch_args, None)?;
     let (range, tilt_limit_rad, seconds) = match crate::whole_body::trained_task(&policy, &robot)? {
@@ -228,6 +277,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let flag = shutdown.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
+    let recording = match args.record {
+        true => Some(start_recording(&out, &robot, domain)?),
+        false => None,
+    };
     let mut launched = Launch::start(&nodes, Some(domain), Some(&out.join("nodes.log")))?;
     let result = drive(
         &model,
@@ -238,9 +291,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
         tilt_limit_rad,
         &shutdown,
         &mut launched,
+        recording.as_ref(),
     );
+    // The recording ends with the run, before the nodes stop (they go on ticking until then).
+    let recording = recording
+        .map(|r| finish_recording(r, crate::record::file_in(&out, &robot)))
+        .transpose();
     launched.stop(Duration::from_secs(5));
-    report(&robot, &result?, targets.len(), &out, args.json)
+    let recording = recording?;
+    report(&robot, &result?, targets.len(), &out, args.json, recording)
 }
 
 /// Control ticks per second of simulated time: every stamp is a whole tick.
@@ -370,14 +429,31 @@ impl<'a> Peer<'a> {
         })
     }
 
-    /// Every node up: the whole-body node's and each arm node's outputs are discovered.
-    fn wait_for_nodes(&mut self, model: &kumi_model::RobotModel) -> Result<()> {
+    /// Every node up: the whole-body node's and each arm node's outputs are discovered, and a
+    /// `recording` records them, this node's targets, the odometry and every module's joint
+    /// states.
+    fn wait_for_nodes(
+        &mut self,
+        model: &kumi_model::RobotModel,
+        recording: Option<&RecordingThread>,
+    ) -> Result<()> {
         let mut outputs = vec![topics::tool_pose(self.robot)];
         for m in model.modules.iter().filter(|m| m.ee_link.is_some()) {
             outputs.push(topics::joint_increments(self.robot, &m.name));
         }
+        let mut recorded = outputs.clone();
+        recorded.push(topics::robot_goal_pose(self.robot));
+        recorded.push(topics::odom(self.robot));
+        for m in model.modules.iter().filter(|m| !m.actuators.is_empty()) {
+            recorded.push(topics::joint_states(self.robot, &m.name));
+        }
+        let unrecorded = |topic: &String| {
+            recording.is_some_and(|r| r.failed() || !r.topics().iter().any(|t| &t.topic == topic))
+        };
         let deadline = Instant::now() + Duration::from_secs(120);
-        while outputs.iter().any(|t| self.node.remote_publishers(t) == 0) {
+        while outputs.iter().any(|t| self.node.remote_publishers(t) == 0)
+            || recorded.iter().any(unrecorded)
+        {
             if let Some((name, status)) = self.launched.exited() {
                 bail!("node `{name}` exited ({status}) during start-up; see the nodes' log");
             }
@@ -637,9 +713,10 @@ fn drive(
     tilt_limit_rad: Option<f64>,
     shutdown: &AtomicBool,
     launched: &mut Launch,
+    recording: Option<&RecordingThread>,
 ) -> Result<Driven> {
     let mut peer = Peer::new(robot, domain, shutdown, launched)?;
-    peer.wait_for_nodes(model)?;
+    peer.wait_for_nodes(model, recording)?;
     let mut run = Driven::default();
     let (mut first, mut preplaced, mut odometry) = (0, None, BTreeMap::new());
     // Where the robot starts, and where a reset puts it.
@@ -815,6 +892,7 @@ fn report(
     drawn: usize,
     out: &std::path::Path,
     json: bool,
+    recording: Option<Recording>,
 ) -> Result<()> {
     let (targets, samples, tipped) = (&run.placed, &run.samples, &run.tipped);
     let csv_path = out.join("run.csv");
@@ -906,6 +984,7 @@ fn report(
         inexact_ticks: run.inexact_ticks,
         plot: svg_path.display().to_string(),
         csv: csv_path.display().to_string(),
+        recording,
     };
     if json {
         println!("{}", serde_json::to_string(&report)?);
@@ -934,6 +1013,9 @@ fn report(
             );
         }
         println!("plot: {}\ncsv: {}", report.plot, report.csv);
+        if let Some(r) = &report.recording {
+            println!("recording: {}", r.file);
+        }
     }
     Ok(())
 }

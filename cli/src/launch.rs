@@ -67,6 +67,10 @@ pub struct LaunchArgs {
     /// The Motion Stack profile for `--hardware motion-stack`.
     #[arg(long, value_name = "FILE")]
     pub profile: Option<PathBuf>,
+    /// Record every topic of the robot to DIR/<robot>.mcap (`kumi record`, started before the
+    /// nodes; MCAP as rosbag2 writes it, for Foxglove and `ros2 bag`).
+    #[arg(long, value_name = "DIR")]
+    pub record: Option<PathBuf>,
 }
 
 /// Hardware a launch can drive instead of the simulator.
@@ -165,6 +169,17 @@ pub fn plan(model: &RobotModel, args: &LaunchArgs) -> Result<Vec<Planned>> {
         .hardware
         .map(|_| profile_path(args).display().to_string());
     let mut nodes = Vec::new();
+    if let Some(dir) = &args.record {
+        nodes.push(Planned {
+            name: s("recorder"),
+            args: vec![
+                s("record"),
+                robot.clone(),
+                s("--output"),
+                crate::record::file_in(dir, &robot).display().to_string(),
+            ],
+        });
+    }
     if hardware.is_none() {
         nodes.push(Planned {
             name: s("sim_bridge"),
@@ -442,6 +457,18 @@ pub fn run(args: LaunchArgs) -> Result<()> {
     if !args.no_whole_body {
         check_policy(&model, &args, Some("launch with --no-whole-body"))?;
     }
+    if let Some(dir) = &args.record {
+        crate::output::ensure_dir(dir)?;
+        let robot = args.robot.as_deref().unwrap_or(&model.name);
+        let file = crate::record::file_in(dir, robot);
+        if file.exists() {
+            bail!(
+                "--record {}: {} already exists; remove it or record to another folder",
+                dir.display(),
+                file.display()
+            );
+        }
+    }
     let domain = std::env::var("ROS_DOMAIN_ID").unwrap_or_else(|_| "0".into());
     eprintln!(
         "launching `{}` on ROS domain {domain}: {} nodes. The same by hand, each in its own terminal:",
@@ -491,6 +518,7 @@ mod tests {
             backend: None,
             hardware: None,
             profile: None,
+            record: None,
         }
     }
 
@@ -560,6 +588,24 @@ mod tests {
         unknown.without = vec!["tail".into()];
         let err = plan(&model, &unknown).unwrap_err().to_string();
         assert!(err.contains("no arm module `tail`"), "{err}");
+    }
+
+    #[test]
+    fn a_recording_launch_starts_the_recorder_first_into_its_folder() {
+        let model = load_model("minimal").unwrap();
+        let mut a = args("minimal");
+        a.robot = Some("m2".into());
+        a.record = Some(PathBuf::from("runs/rec"));
+        let nodes = plan(&model, &a).unwrap();
+        assert_eq!(nodes[0].name, "recorder");
+        assert_eq!(
+            shell_line(&nodes[0].args),
+            "kumi record m2 --output runs/rec/m2.mcap"
+        );
+        assert_eq!(
+            nodes.len(),
+            plan(&model, &args("minimal")).unwrap().len() + 1
+        );
     }
 
     #[test]

@@ -12,6 +12,7 @@ mod launch;
 mod output;
 mod plot;
 mod policy;
+mod record;
 mod report;
 mod robot;
 mod sim;
@@ -64,6 +65,9 @@ enum Command {
     /// Bring up a whole robot: the sim bridge, one arm node per arm module and the whole-body
     /// node, each its own process (stop all with Ctrl-C).
     Launch(launch::LaunchArgs),
+    /// Record a robot's topics to an MCAP file (rosbag2's format; opens in Foxglove) until
+    /// Ctrl-C.
+    Record(record::RecordArgs),
     /// Train policies with PPO.
     Train {
         #[command(subcommand)]
@@ -147,6 +151,7 @@ fn run() -> Result<()> {
         Command::WholeBody(args) => whole_body::run(args),
         Command::Launch(args) => launch::run(args),
         Command::Demo(args) => demo::run(args),
+        Command::Record(args) => record::run(args),
         Command::Train { what } => train::run(what),
         Command::Eval { what } => eval::run(what),
         Command::Bench { what } => bench::run(what),

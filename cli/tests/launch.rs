@@ -531,6 +531,16 @@ fn the_demo_runs_end_to_end_with_its_plot_csv_and_json() {
 
 /// Runs `kumi demo` with `args` to its end; its JSON report, its CSV and its plot.
 fn demo(args: &[&str]) -> (serde_json::Value, String, String) {
+    let (report, dir) = demo_kept(args);
+    let csv = std::fs::read_to_string(report["csv"].as_str().unwrap()).unwrap();
+    let svg = std::fs::read_to_string(report["plot"].as_str().unwrap()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    (report, csv, svg)
+}
+
+/// Runs `kumi demo` with `args` to its end; its JSON report and its output folder (the
+/// caller removes it).
+fn demo_kept(args: &[&str]) -> (serde_json::Value, std::path::PathBuf) {
     let domain = fresh_domain();
     let dir = std::env::temp_dir().join(format!("kumi-demo-{}-{domain}", std::process::id()));
     let (d, out) = (domain.to_string(), dir.display().to_string());
@@ -546,11 +556,166 @@ fn demo(args: &[&str]) -> (serde_json::Value, String, String) {
         .lines()
         .find(|l| l.starts_with("{\"robot\""))
         .unwrap_or_else(|| panic!("no JSON line: {log}"));
-    let report: serde_json::Value = serde_json::from_str(line).unwrap();
+    (serde_json::from_str(line).unwrap(), dir)
+}
+
+/// Every channel of a recording read back: rosbag2's encodings, its summary's count equal to
+/// the messages read, each message decoded from the file's own schema to the values rclpy's
+/// type support gives (tf2_msgs, not on PyPI, only the former), each schema's definition that
+/// of the installed interface. Returns the channels by topic.
+fn check_recording(recording: &serde_json::Value) -> serde_json::Map<String, serde_json::Value> {
+    assert_eq!(recording["profile"], "ros2");
+    assert_eq!(recording["log_time_in_order"], true);
+    let channels = recording["channels"].as_object().unwrap().clone();
+    for (topic, c) in &channels {
+        assert_eq!(c["schema_encoding"], "ros2msg", "{topic}: {c}");
+        assert_eq!(c["message_encoding"], "cdr", "{topic}: {c}");
+        assert_eq!(c["summary_count"], c["count"], "{topic}: {c}");
+        assert_eq!(c["mismatches"], serde_json::json!([]), "{topic}: {c}");
+        let tf = c["type"] == "tf2_msgs/msg/TFMessage";
+        assert_eq!(c["checked_natively"], !tf, "{topic}: {c}");
+        if !tf {
+            assert_eq!(c["definition_matches"], true, "{topic}: {c}");
+        }
+    }
+    channels
+}
+
+/// Issue 69, item 8: `kumi demo --record` writes every topic of the run to an MCAP file that
+/// the `mcap` Python package opens; its channels, schemas and counts are what the nodes and the
+/// demo published.
+#[test]
+fn a_recording_of_the_demo_holds_every_topic_as_it_was_published() {
+    let _one = one_at_a_time();
+    let (report, dir) = demo_kept(&["minimal", "--targets", "2", "--seconds", "2", "--record"]);
+    let file = std::path::PathBuf::from(report["recording"]["file"].as_str().unwrap());
+    assert_eq!(file, dir.join("minimal.mcap"));
+    let recording = kumi_tests::read_mcap(&file);
     let csv = std::fs::read_to_string(report["csv"].as_str().unwrap()).unwrap();
-    let svg = std::fs::read_to_string(report["plot"].as_str().unwrap()).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
-    (report, csv, svg)
+    let channels = check_recording(&recording);
+    let expected = [
+        ("/minimal/arm0/joint_states", "sensor_msgs/msg/JointState"),
+        ("/minimal/wheel0/joint_states", "sensor_msgs/msg/JointState"),
+        ("/minimal/arm0/joint_targets", "sensor_msgs/msg/JointState"),
+        (
+            "/minimal/arm0/joint_increments",
+            "std_msgs/msg/Float64MultiArray",
+        ),
+        ("/minimal/arm0/goal_pose", "geometry_msgs/msg/PoseStamped"),
+        ("/minimal/arm0/ee_pose", "geometry_msgs/msg/PoseStamped"),
+        ("/minimal/wheel0/wheel_velocity", "std_msgs/msg/Float64"),
+        ("/minimal/odom", "nav_msgs/msg/Odometry"),
+        ("/minimal/imu", "sensor_msgs/msg/Imu"),
+        ("/minimal/goal_pose", "geometry_msgs/msg/PoseStamped"),
+        ("/minimal/tool_pose", "geometry_msgs/msg/PoseStamped"),
+        ("/minimal/robot_description", "std_msgs/msg/String"),
+        ("/minimal/clock", "rosgraph_msgs/msg/Clock"),
+        ("/clock", "rosgraph_msgs/msg/Clock"),
+        ("/tf", "tf2_msgs/msg/TFMessage"),
+        ("/tf_static", "tf2_msgs/msg/TFMessage"),
+        ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
+        ("/rosout", "rcl_interfaces/msg/Log"),
+    ];
+    for (topic, ty) in expected {
+        let c = channels
+            .get(topic)
+            .unwrap_or_else(|| panic!("{topic} not recorded: {recording}"));
+        assert_eq!(c["type"], ty, "{topic}");
+    }
+    assert_eq!(channels.len(), expected.len(), "{recording}");
+    // What the demo says it recorded is what the file holds.
+    for t in report["recording"]["topics"].as_array().unwrap() {
+        let topic = t["topic"].as_str().unwrap();
+        assert_eq!(t["messages"], channels[topic]["count"], "{topic}");
+    }
+    // Latched topics once each; the demo's two targets.
+    assert_eq!(channels["/minimal/robot_description"]["count"], 1);
+    assert_eq!(channels["/tf_static"]["count"], 1);
+    let frames = channels["/tf_static"]["frames"].as_array().unwrap();
+    assert!(frames.contains(&"minimal/arm0/ee".into()), "{frames:?}");
+    // (The demo sends a target again until its ticks begin: on a loaded machine, twice.)
+    let goals: std::collections::BTreeSet<u64> = channels["/minimal/goal_pose"]["stamps_ns"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_u64().unwrap())
+        .collect();
+    assert_eq!(
+        goals,
+        [0, 2_000_000_000].into(),
+        "the first at once, the second at 2 s"
+    );
+    // Every tick of the run, as the demo's CSV has it, has its tool pose, odometry and
+    // joint states in the recording.
+    let tick = |ns: u64| (ns as f64 * 1e-9 * 30.0).round() as i64;
+    let ticks_of = |topic: &str| -> std::collections::BTreeSet<i64> {
+        channels[topic]["stamps_ns"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| tick(s.as_u64().unwrap()))
+            .collect()
+    };
+    let run: Vec<i64> = csv
+        .lines()
+        .skip(1)
+        .map(|l| (l.split(',').next().unwrap().parse::<f64>().unwrap() * 30.0).round() as i64)
+        .collect();
+    assert_eq!(run.len(), 120, "two 2 s targets at 30 Hz");
+    for topic in [
+        "/minimal/tool_pose",
+        "/minimal/odom",
+        "/minimal/arm0/joint_states",
+        "/minimal/wheel0/joint_states",
+        "/minimal/arm0/goal_pose",
+    ] {
+        let recorded = ticks_of(topic);
+        let missing: Vec<&i64> = run.iter().filter(|t| !recorded.contains(t)).collect();
+        assert!(
+            missing.is_empty(),
+            "{topic}: ticks {missing:?} not recorded"
+        );
+    }
+}
+
+/// `kumi launch --record DIR`: the recorder starts with the nodes, and a Ctrl-C of the launch
+/// leaves a finished file (its summary written); a second launch does not overwrite it.
+#[test]
+fn a_launch_with_record_leaves_a_finished_recording_after_ctrl_c() {
+    let _one = one_at_a_time();
+    let domain = fresh_domain();
+    let dir = std::env::temp_dir().join(format!("kumi-record-{}-{domain}", std::process::id()));
+    let out = dir.display().to_string();
+    let mut launched = launch(domain, &["minimal", "--record", &out]);
+    // Real time: a few seconds of joint states at 30 Hz.
+    std::thread::sleep(Duration::from_secs(3));
+    let stopped = std::process::Command::new("kill")
+        .args(["-INT", &launched.pid().to_string()])
+        .status()
+        .unwrap();
+    assert!(stopped.success());
+    let start = std::time::Instant::now();
+    while launched.alive() && start.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let log = launched.log();
+    assert!(log.contains("[recorder] recorded "), "{log}");
+    let recording = kumi_tests::read_mcap(&dir.join("minimal.mcap"));
+    let channels = check_recording(&recording);
+    assert_eq!(channels["/minimal/robot_description"]["count"], 1);
+    assert_eq!(channels["/tf_static"]["count"], 1);
+    let states = channels["/minimal/arm0/joint_states"]["count"]
+        .as_u64()
+        .unwrap();
+    assert!(states >= 30, "{states} joint states in 3 s at 30 Hz");
+    assert!(
+        channels.contains_key("/minimal/arm0/goal_pose"),
+        "{recording}"
+    );
+    let again = kumi_once(domain, &["launch", "minimal", "--record", &out], START);
+    assert!(again.contains("already exists"), "{again}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -7,6 +7,7 @@
 
 pub mod builtin_interfaces;
 pub mod cdr;
+pub mod definitions;
 pub mod diagnostic_msgs;
 mod fixed_array;
 pub mod geometry_msgs;

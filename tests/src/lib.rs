@@ -40,7 +40,8 @@ pub fn python() -> PathBuf {
         "no Python with rclpy at {}: run `bash .ci/run`, or create it with \
          `python3 -m venv target/rosvenv && target/rosvenv/bin/pip install ros-rclpy \
          ros-rmw-fastrtps-cpp ros-std-msgs ros-geometry-msgs ros-sensor-msgs ros-nav-msgs \
-         ros-rosgraph-msgs ros-diagnostic-msgs ros-std-srvs` (or set KUMI_ROS_PYTHON)",
+         ros-rosgraph-msgs ros-diagnostic-msgs ros-std-srvs mcap mcap-ros2-support` (or set \
+         KUMI_ROS_PYTHON)",
         path.display()
     );
     path
@@ -197,6 +198,25 @@ pub fn peer_in(
         Some(status) => panic!("{}", said(&format!("failed: {status}"))),
         None => panic!("{}", said(&format!("ran past its {deadline:?} deadline"))),
     }
+}
+
+/// An MCAP recording as `tests/ros/mcap_read.py` reads it with the `mcap` and
+/// `mcap-ros2-support` packages: its header, and per topic its schema, encodings, message
+/// counts (from the summary and by reading), whether every message decodes to the same values
+/// with rclpy's type support, its definition against the installed `.msg`, and its stamps.
+pub fn read_mcap(path: &std::path::Path) -> serde_json::Value {
+    let out = Command::new(python())
+        .arg(workspace().join("tests/ros/mcap_read.py"))
+        .arg(path)
+        .output()
+        .expect("run mcap_read.py");
+    assert!(
+        out.status.success(),
+        "mcap_read.py {} failed: {}",
+        path.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("mcap_read.py prints JSON")
 }
 
 /// What `tests/ros/peer.py` says on stderr (`RESULT_OUT`) once its result is printed and flushed.

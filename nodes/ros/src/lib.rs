@@ -20,7 +20,7 @@ pub mod topics;
 mod warn;
 
 pub use ros2_client::Publisher;
-pub use strict::StrictSubscription;
+pub use strict::{RawChange, RawSubscription, StrictSubscription};
 pub use warn::RateLimited;
 
 use kumi_msgs::RosMessage;
@@ -167,12 +167,22 @@ impl RosNode {
         full_name: &str,
         qos: &QosProfile,
     ) -> Result<ros2_client::dds::rustdds::Topic, RosError> {
+        self.topic_of_type(full_name, M::PACKAGE, M::NAME, qos)
+    }
+
+    fn topic_of_type(
+        &mut self,
+        full_name: &str,
+        package: &str,
+        type_name: &str,
+        qos: &QosProfile,
+    ) -> Result<ros2_client::dds::rustdds::Topic, RosError> {
         let name = Name::parse(full_name).map_err(|e| RosError::BadName {
             name: full_name.to_string(),
             reason: format!("{e:?}"),
         })?;
         self.node
-            .create_topic(&name, MessageTypeName::new(M::PACKAGE, M::NAME), qos)
+            .create_topic(&name, MessageTypeName::new(package, type_name), qos)
             .map_err(create_error("topic", full_name))
     }
 
@@ -207,8 +217,21 @@ impl RosNode {
         full_name: &str,
         qos: QosProfile,
     ) -> Result<StrictSubscription<M>, RosError> {
+        let raw = self.raw_subscription(full_name, M::PACKAGE, M::NAME, qos)?;
+        Ok(StrictSubscription::new(raw))
+    }
+
+    /// A subscription to the absolute topic `full_name` of type `package/msg/type_name` that
+    /// hands over each payload undecoded ([`RawSubscription`]).
+    pub fn raw_subscription(
+        &mut self,
+        full_name: &str,
+        package: &str,
+        type_name: &str,
+        qos: QosProfile,
+    ) -> Result<RawSubscription, RosError> {
         use ros2_client::dds::rustdds::QosPolicies;
-        let topic = self.topic::<M>(full_name, &qos)?;
+        let topic = self.topic_of_type(full_name, package, type_name, &qos)?;
         let graph = self
             .node
             .create_subscription::<strict::Unread>(&topic, Some(qos.clone()))
@@ -230,6 +253,51 @@ impl RosNode {
                 Some(QosPolicies::from(qos)),
             )
             .map_err(create_error("subscription", full_name))?;
-        Ok(StrictSubscription::new(reader, graph))
+        Ok(RawSubscription::new(reader, graph))
     }
+
+    /// Every topic that writers of other participants publish on, as DDS discovery knows them
+    /// now: ROS topics only (DDS names `rt/...`), one entry per topic and type.
+    pub fn discovered_topics(&self) -> Vec<DiscoveredTopic> {
+        use ros2_client::dds::rustdds::policy::{Durability as DdsDurability, Reliability};
+        let mut found: Vec<DiscoveredTopic> = Vec::new();
+        for w in self.context.domain_participant().discovered_writers() {
+            let data = &w.publication_topic_data;
+            let Some(name) = data.topic_name.strip_prefix("rt") else {
+                continue;
+            };
+            let topic = DiscoveredTopic {
+                name: name.to_string(),
+                dds_type: data.type_name.clone(),
+                reliable: matches!(data.reliability, Some(Reliability::Reliable { .. })),
+                transient_local: matches!(data.durability, Some(DdsDurability::TransientLocal)),
+            };
+            match found
+                .iter_mut()
+                .find(|t| t.name == topic.name && t.dds_type == topic.dds_type)
+            {
+                // A reader matches a writer only if it asks for no more than the writer
+                // offers: what every writer on the topic offers.
+                Some(known) => {
+                    known.reliable &= topic.reliable;
+                    known.transient_local &= topic.transient_local;
+                }
+                None => found.push(topic),
+            }
+        }
+        found
+    }
+}
+
+/// A topic some other participant publishes on ([`RosNode::discovered_topics`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DiscoveredTopic {
+    /// The absolute ROS name, `/robot/odom`.
+    pub name: String,
+    /// The DDS type name, `nav_msgs::msg::dds_::Odometry_`.
+    pub dds_type: String,
+    /// Whether every writer on it is reliable.
+    pub reliable: bool,
+    /// Whether every writer on it keeps its last samples for late readers (latched).
+    pub transient_local: bool,
 }

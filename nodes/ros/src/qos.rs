@@ -30,3 +30,21 @@ pub fn rosout() -> QosProfile {
         .durability(Durability::TransientLocal)
         .history(History::KeepLast { depth: 1000 })
 }
+
+/// What a reader asks for to match every writer of a topic and get what they keep: reliable
+/// and transient local only when every writer offers it ([`crate::DiscoveredTopic`]); keep
+/// last 1000, so that a reader drained a few times a second loses nothing.
+pub fn matching(topic: &crate::DiscoveredTopic) -> QosProfile {
+    let profile = if topic.reliable {
+        QosProfile::publisher_default().reliability_reliable(WhenFull::DEFAULT)
+    } else {
+        QosProfile::publisher_default().reliability_best_effort()
+    };
+    profile
+        .durability(if topic.transient_local {
+            Durability::TransientLocal
+        } else {
+            Durability::Volatile
+        })
+        .history(History::KeepLast { depth: 1000 })
+}

@@ -90,28 +90,32 @@ impl<'de> serde::Deserialize<'de> for Unread {
     }
 }
 
-/// A strictly decoding subscription to `M`.
-pub struct StrictSubscription<M> {
-    reader: no_key::SimpleDataReader<RawSample, RawAdapter>,
-    graph: Subscription<Unread>,
-    _message: std::marker::PhantomData<M>,
+/// A sample as it arrived, with its writer and when the writer stamped it.
+#[derive(Debug, Clone)]
+pub struct RawChange {
+    pub sample: RawSample,
+    pub writer: Gid,
+    /// The writer's source timestamp [ns since the Unix epoch], when it sent one.
+    pub source_time_ns: Option<u64>,
 }
 
-impl<M: RosMessage> StrictSubscription<M> {
+/// A subscription that hands over payloads undecoded (for a recorder, or to decode strictly).
+pub struct RawSubscription {
+    reader: no_key::SimpleDataReader<RawSample, RawAdapter>,
+    graph: Subscription<Unread>,
+}
+
+impl RawSubscription {
     pub(crate) fn new(
         reader: no_key::SimpleDataReader<RawSample, RawAdapter>,
         graph: Subscription<Unread>,
     ) -> Self {
-        Self {
-            reader,
-            graph,
-            _message: std::marker::PhantomData,
-        }
+        Self { reader, graph }
     }
 
-    /// The next waiting message and its writer; `None` when none waits; `Some(Err(why))` for
-    /// one that did not decode exactly (it is consumed).
-    pub fn take(&self) -> Option<Result<(M, Gid), String>> {
+    /// The next waiting sample; `None` when none waits; `Some(Err(why))` when the reader
+    /// failed.
+    pub fn take(&self) -> Option<Result<RawChange, String>> {
         for _ in 0..1000 {
             if !matches!(self.graph.take(), Ok(Some(_))) {
                 break;
@@ -122,9 +126,62 @@ impl<M: RosMessage> StrictSubscription<M> {
             Ok(None) => None,
             Ok(Some(change)) => {
                 let writer = Gid::from(change.writer_guid);
-                Some(decode::<M>(&change.into_value()).map(|m| (m, writer)))
+                let source_time_ns = change
+                    .source_timestamp()
+                    .and_then(|t| nanos_of_ticks(t.to_ticks()));
+                Some(Ok(RawChange {
+                    sample: change.into_value(),
+                    writer,
+                    source_time_ns,
+                }))
             }
             Err(e) => Some(Err(format!("{e:?}"))),
         }
+    }
+}
+
+/// A DDS timestamp in ticks (seconds in the high 32 bits, 2^-32 s in the low) in
+/// nanoseconds; `None` for DDS's invalid and infinite times.
+fn nanos_of_ticks(ticks: u64) -> Option<u64> {
+    (ticks < 0xFFFF_FFFF_0000_0000)
+        .then(|| ((ticks >> 32) * 1_000_000_000) + (((ticks & 0xFFFF_FFFF) * 1_000_000_000) >> 32))
+}
+
+/// A strictly decoding subscription to `M`.
+pub struct StrictSubscription<M> {
+    raw: RawSubscription,
+    _message: std::marker::PhantomData<M>,
+}
+
+impl<M: RosMessage> StrictSubscription<M> {
+    pub(crate) fn new(raw: RawSubscription) -> Self {
+        Self {
+            raw,
+            _message: std::marker::PhantomData,
+        }
+    }
+
+    /// The next waiting message and its writer; `None` when none waits; `Some(Err(why))` for
+    /// one that did not decode exactly (it is consumed).
+    pub fn take(&self) -> Option<Result<(M, Gid), String>> {
+        self.raw
+            .take()
+            .map(|taken| taken.and_then(|c| decode::<M>(&c.sample).map(|m| (m, c.writer))))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dds_timestamps_convert_to_nanoseconds() {
+        assert_eq!(nanos_of_ticks(0), Some(0));
+        assert_eq!(
+            nanos_of_ticks((1_700_000_000 << 32) + (1 << 31)),
+            Some(1_700_000_000_500_000_000)
+        );
+        assert_eq!(nanos_of_ticks(u64::MAX), None);
+        assert_eq!(nanos_of_ticks(u64::MAX - 1), None);
     }
 }
