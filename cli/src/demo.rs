@@ -18,7 +18,7 @@ use kumi_msgs::diagnostic_msgs::DiagnosticArray;
 use kumi_msgs::geometry_msgs::PoseStamped;
 use kumi_msgs::nav_msgs::Odometry;
 use kumi_msgs::std_msgs::Header;
-use kumi_recorder::{Recorder, RecordingThread};
+use kumi_recorder::{RecordedTopic, Recorder, RecordingThread};
 use kumi_ros::services::TriggerClient;
 use kumi_ros::{geometry, qos, topics, Publisher, RosNode};
 use kumi_terms::observation::{target_errors, tool_yaw, Target};
@@ -155,14 +155,6 @@ struct Recording {
     topics: Vec<RecordedTopic>,
 }
 
-#[derive(serde::Serialize)]
-struct RecordedTopic {
-    topic: String,
-    #[serde(rename = "type")]
-    ros_type: String,
-    messages: u64,
-}
-
 /// Starts recording the run into `<out>/<robot>.mcap`, replacing an earlier run's.
 fn start_recording(out: &std::path::Path, robot: &str, domain: u16) -> Result<RecordingThread> {
     let file = crate::record::file_in(out, robot);
@@ -173,19 +165,13 @@ fn start_recording(out: &std::path::Path, robot: &str, domain: u16) -> Result<Re
 }
 
 /// Stops the recording and says what it holds.
-fn finish_recording(recording: RecordingThread, file: std::path::PathBuf) -> Result<Recording> {
+fn finish_recording(recording: RecordingThread) -> Result<Recording> {
+    let file = recording.path().to_path_buf();
     let topics = recording.stop()?;
     eprintln!("demo: {}", crate::record::summary(&file, &topics));
     Ok(Recording {
         file: file.display().to_string(),
-        topics: topics
-            .into_iter()
-            .map(|t| RecordedTopic {
-                topic: t.topic,
-                ros_type: t.ros_type,
-                messages: t.messages,
-            })
-            .collect(),
+        topics,
     })
 }
 
@@ -294,9 +280,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         recording.as_ref(),
     );
     // The recording ends with the run, before the nodes stop (they go on ticking until then).
-    let recording = recording
-        .map(|r| finish_recording(r, crate::record::file_in(&out, &robot)))
-        .transpose();
+    let recording = recording.map(finish_recording).transpose();
     launched.stop(Duration::from_secs(5));
     let recording = recording?;
     report(&robot, &result?, targets.len(), &out, args.json, recording)
@@ -447,13 +431,14 @@ impl<'a> Peer<'a> {
         for m in model.modules.iter().filter(|m| !m.actuators.is_empty()) {
             recorded.push(topics::joint_states(self.robot, &m.name));
         }
-        let unrecorded = |topic: &String| {
-            recording.is_some_and(|r| r.failed() || !r.topics().iter().any(|t| &t.topic == topic))
+        let recording_ready = || {
+            recording.is_none_or(|r| {
+                let have = r.topics();
+                !r.failed() && recorded.iter().all(|t| have.iter().any(|h| &h.topic == t))
+            })
         };
         let deadline = Instant::now() + Duration::from_secs(120);
-        while outputs.iter().any(|t| self.node.remote_publishers(t) == 0)
-            || recorded.iter().any(unrecorded)
-        {
+        while outputs.iter().any(|t| self.node.remote_publishers(t) == 0) || !recording_ready() {
             if let Some((name, status)) = self.launched.exited() {
                 bail!("node `{name}` exited ({status}) during start-up; see the nodes' log");
             }

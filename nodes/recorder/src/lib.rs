@@ -14,7 +14,7 @@ use std::collections::BTreeSet;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use kumi_msgs::cdr::ByteOrder;
 use kumi_msgs::definitions;
@@ -66,11 +66,16 @@ pub fn stored_message(sample: &RawSample) -> Option<Vec<u8>> {
     Some(bytes)
 }
 
+/// How often a recorder looks for new topics: discovery copies every known writer, too much
+/// work for each poll, and a topic is found within this of its writer's discovery.
+pub const DISCOVERY_PERIOD: Duration = Duration::from_millis(100);
+
 /// One recorded topic and how many messages it holds.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct RecordedTopic {
     pub topic: String,
     /// `package/msg/Name`.
+    #[serde(rename = "type")]
     pub ros_type: String,
     pub messages: u64,
 }
@@ -89,6 +94,8 @@ pub struct Recorder {
     writer: mcap::Writer<BufWriter<File>>,
     /// Topics and DDS types seen and not recorded (no known schema), each reported once.
     skipped: BTreeSet<(String, String)>,
+    /// When discovery was last looked at ([`DISCOVERY_PERIOD`]).
+    discovered_at: Option<Instant>,
     robot: String,
     path: PathBuf,
     node: RosNode,
@@ -118,6 +125,7 @@ impl Recorder {
             channels: Vec::new(),
             writer,
             skipped: BTreeSet::new(),
+            discovered_at: None,
             robot: robot.to_string(),
             path: path.to_path_buf(),
             node,
@@ -134,10 +142,17 @@ impl Recorder {
         self.channels.iter().map(|c| c.recorded.clone()).collect()
     }
 
-    /// Subscribes to the robot's topics discovered since the last call and writes every
-    /// message that has arrived. Returns how many were written.
+    /// Subscribes to the robot's topics discovered since it last looked (at most every
+    /// [`DISCOVERY_PERIOD`]) and writes every message that has arrived. Returns how many were
+    /// written.
     pub fn poll(&mut self) -> Result<usize, RecordError> {
-        self.subscribe_new()?;
+        if self
+            .discovered_at
+            .is_none_or(|t| t.elapsed() >= DISCOVERY_PERIOD)
+        {
+            self.subscribe_new()?;
+            self.discovered_at = Some(Instant::now());
+        }
         let mut written = 0;
         for channel in &mut self.channels {
             while let Some(taken) = channel.subscription.take() {
@@ -241,12 +256,18 @@ impl Recorder {
 
 /// A recording made by a thread of its own ([`Recorder::spawn`]).
 pub struct RecordingThread {
+    path: PathBuf,
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     recorded: std::sync::Arc<std::sync::Mutex<Vec<RecordedTopic>>>,
     handle: std::thread::JoinHandle<Result<Vec<RecordedTopic>, RecordError>>,
 }
 
 impl RecordingThread {
+    /// The file being written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     /// The topics recorded so far, with their message counts.
     pub fn topics(&self) -> Vec<RecordedTopic> {
         self.recorded.lock().map(|t| t.clone()).unwrap_or_default()
@@ -272,6 +293,7 @@ impl RecordingThread {
 impl Recorder {
     /// Records on a thread of its own, polling every 5 ms, until [`RecordingThread::stop`].
     pub fn spawn(mut self) -> RecordingThread {
+        let path = self.path.clone();
         use std::sync::atomic::{AtomicBool, Ordering};
         use std::sync::{Arc, Mutex};
         let stop = Arc::new(AtomicBool::new(false));
@@ -292,6 +314,7 @@ impl Recorder {
             self.finish()
         });
         RecordingThread {
+            path,
             stop,
             recorded,
             handle,
