@@ -208,10 +208,14 @@ impl SkillDriver {
             world.joint_velocities(),
             world.commands(),
         );
-        let q = self.at(&q);
-        let tool_b = self.kinematics.tool_pose_b(&q);
-        let observation =
-            observation::build(&q, &self.at(&qd), &self.at(&targets), &self.goal, &tool_b);
+        let fk = |q: &[f64; JOINTS]| self.kinematics.tool_pose_b(q);
+        let observation = observation::build(
+            &self.at(&q),
+            &self.at(&qd),
+            &self.at(&targets),
+            &self.goal,
+            &fk,
+        );
         let action = self.policy.act(&observation)?;
         let increments = self.skill.increments(&action);
         match self.max_lead_rad {

@@ -3,9 +3,12 @@
 //! values come from [`crate::skill::ArmSkill::metadata`]; [`crate::skill::ArmSkill::check`]
 //! compares them with the module a policy is asked to drive.
 
-/// Format tag of the low-level arm-reaching skill that reads the whole observation, the tool's
-/// error included ([`crate::observation::OBSERVATION_DIM`] values).
-pub const ARM_REACH_FORMAT: &str = "kumi-skill/arm-reach/3";
+/// Format tag of the low-level arm-reaching skill that reads the whole observation, the joint
+/// step toward the goal included ([`crate::observation::OBSERVATION_DIM`] values).
+pub const ARM_REACH_FORMAT: &str = "kumi-skill/arm-reach/4";
+/// Format tag of a skill that reads the values up to the tool's error, the observation's
+/// leading [`crate::observation::TOOL_DIM`].
+pub const ARM_REACH_FORMAT_TOOL: &str = "kumi-skill/arm-reach/3";
 /// Format tag of a skill that reads Table I's values and the targets' lead, the observation's
 /// leading [`crate::observation::LEAD_DIM`].
 pub const ARM_REACH_FORMAT_LEAD: &str = "kumi-skill/arm-reach/2";

@@ -9,24 +9,32 @@
 //! ([`crate::kinematics::ToolKinematics`]) set against the goal: without it the policy has to
 //! learn the arm's kinematics to tell how far it still has to go.
 //!
+//! The joint step is the damped least-squares step toward the goal
+//! ([`crate::kinematics::damped_step_rad`]): the tool's error mapped back to the joints, which a
+//! network finds hard to learn to the last centimetre.
+//!
 //! Each format reads a prefix of one layout: `kumi-skill/arm-reach/1` the first 21 values
-//! ([`BASE_DIM`], Table I's), `/2` the first 28 ([`LEAD_DIM`], with the lead), `/3` all
-//! [`OBSERVATION_DIM`].
+//! ([`BASE_DIM`], Table I's), `/2` the first 28 ([`LEAD_DIM`], with the lead), `/3` the first 34
+//! ([`TOOL_DIM`], with the tool's error), `/4` all [`OBSERVATION_DIM`].
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
+use crate::kinematics::damped_step_rad;
 use crate::rotation::canonical;
 
 /// Joints of an arm module.
 pub const JOINTS: usize = 7;
 /// Length of the observation.
-pub const OBSERVATION_DIM: usize = 34;
+pub const OBSERVATION_DIM: usize = 41;
 /// Length of Table I's part (joints, velocities, goal): what a skill of format
 /// `kumi-skill/arm-reach/1` reads.
 pub const BASE_DIM: usize = 21;
 /// Length of Table I's part and the targets' lead: what a skill of format
 /// `kumi-skill/arm-reach/2` reads.
 pub const LEAD_DIM: usize = 28;
+/// Length of the values up to the tool's error: what a skill of format
+/// `kumi-skill/arm-reach/3` reads.
+pub const TOOL_DIM: usize = 34;
 
 /// Name of each observation entry, in order (written into the exported policy's metadata).
 pub const OBSERVATION_NAMES: [&str; OBSERVATION_DIM] = [
@@ -64,6 +72,13 @@ pub const OBSERVATION_NAMES: [&str; OBSERVATION_DIM] = [
     "tool_to_goal_rx",
     "tool_to_goal_ry",
     "tool_to_goal_rz", // tool to goal rotation, a rotation vector in the base frame [rad]
+    "step1",
+    "step2",
+    "step3",
+    "step4",
+    "step5",
+    "step6",
+    "step7", // damped least-squares joint step toward the goal [rad]
 ];
 
 /// A reaching goal for the tool frame, in the arm base frame (`_b`).
@@ -77,16 +92,18 @@ pub struct Goal {
 
 /// Builds the observation: `q` [rad] and `qd` [rad/s] in the module's joint order, the goal in
 /// the arm base frame, the joints' position targets [rad] (what the servos are commanded
-/// to, which the skill's increments move), and the tool pose in the arm base frame as the
-/// forward kinematics of `q` give it. The goal quaternion is written with a non-negative
+/// to, which the skill's increments move), and the module's forward kinematics
+/// (`tool_pose_b`: the tool pose in the arm base frame from joint angles), which give the
+/// tool's error and the joint step. The goal quaternion is written with a non-negative
 /// scalar part. Values are rounded to f32 here, once, for both training and deployment.
 pub fn build(
     q: &[f64; JOINTS],
     qd: &[f64; JOINTS],
     targets: &[f64; JOINTS],
     goal: &Goal,
-    tool_b: &Isometry3<f64>,
+    tool_pose_b: &dyn Fn(&[f64; JOINTS]) -> Isometry3<f64>,
 ) -> [f32; OBSERVATION_DIM] {
+    let tool_b = tool_pose_b(q);
     let mut obs = [0.0_f32; OBSERVATION_DIM];
     for i in 0..JOINTS {
         obs[i] = q[i] as f32;
@@ -107,6 +124,9 @@ pub fn build(
     for i in 0..3 {
         obs[LEAD_DIM + i] = to_goal_b[i] as f32;
         obs[LEAD_DIM + 3 + i] = rotation_b[i] as f32;
+    }
+    for (j, step) in damped_step_rad(tool_pose_b, q, goal).iter().enumerate() {
+        obs[TOOL_DIM + j] = *step as f32;
     }
     obs
 }
@@ -131,7 +151,7 @@ mod tests {
             Vector3::new(0.15, -0.125, 1.0).into(),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.2),
         );
-        let obs = build(&q, &qd, &targets, &goal, &tool_b);
+        let obs = build(&q, &qd, &targets, &goal, &|_| tool_b);
         assert_eq!(&obs[..7], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7]);
         assert_eq!(&obs[7..14], &[-1.0, -2.0, -3.0, -4.0, -5.0, -6.0, -7.0]);
         assert_eq!(&obs[14..17], &[0.25, -0.125, 1.0]);
@@ -150,7 +170,13 @@ mod tests {
             close(&obs[LEAD_DIM..LEAD_DIM + 3], &[0.1, 0.0, 0.0]),
             "{obs:?}"
         );
-        assert!(close(&obs[LEAD_DIM + 3..], &[0.0, 0.0, 0.3]), "{obs:?}");
+        assert!(
+            close(&obs[LEAD_DIM + 3..TOOL_DIM], &[0.0, 0.0, 0.3]),
+            "{obs:?}"
+        );
+        assert_eq!(OBSERVATION_NAMES[TOOL_DIM], "step1");
+        // A tool the joints do not move has no step.
+        assert_eq!(&obs[TOOL_DIM..], &[0.0; JOINTS]);
     }
 
     #[test]
@@ -166,7 +192,7 @@ mod tests {
             &[0.0; JOINTS],
             &[0.0; JOINTS],
             &goal,
-            &tool_b,
+            &|_| tool_b,
         );
         assert!(obs[LEAD_DIM..].iter().all(|v| v.abs() < 1e-6), "{obs:?}");
     }

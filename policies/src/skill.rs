@@ -9,7 +9,9 @@ use std::collections::BTreeMap;
 use kumi_model::ModuleInstance;
 
 use crate::metadata;
-use crate::observation::{BASE_DIM, JOINTS, LEAD_DIM, OBSERVATION_DIM, OBSERVATION_NAMES};
+use crate::observation::{
+    BASE_DIM, JOINTS, LEAD_DIM, OBSERVATION_DIM, OBSERVATION_NAMES, TOOL_DIM,
+};
 
 /// The bound [policy units] the skill's action values are clipped to before they are scaled
 /// to joint increments ([`ArmSkill::increments`]).
@@ -125,9 +127,9 @@ impl ArmSkill {
     }
 
     /// The metadata an exported policy of this skill carries, reading the leading
-    /// `observation_dim` observation values ([`OBSERVATION_DIM`]; [`LEAD_DIM`], format
-    /// `kumi-skill/arm-reach/2`; or [`BASE_DIM`] for Table I's observation, format
-    /// `kumi-skill/arm-reach/1`). `config_hash` identifies the training
+    /// `observation_dim` observation values ([`OBSERVATION_DIM`]; [`TOOL_DIM`], format
+    /// `kumi-skill/arm-reach/3`; [`LEAD_DIM`], format `kumi-skill/arm-reach/2`; or [`BASE_DIM`]
+    /// for Table I's observation, format `kumi-skill/arm-reach/1`). `config_hash` identifies the training
     /// config, `env_steps` how long it trained.
     pub fn metadata(
         &self,
@@ -151,6 +153,7 @@ impl ArmSkill {
         let format = match observation_dim {
             BASE_DIM => metadata::ARM_REACH_FORMAT_BASE,
             LEAD_DIM => metadata::ARM_REACH_FORMAT_LEAD,
+            TOOL_DIM => metadata::ARM_REACH_FORMAT_TOOL,
             _ => metadata::ARM_REACH_FORMAT,
         };
         [
@@ -173,14 +176,16 @@ impl ArmSkill {
 
     /// Checks a policy's metadata against this module: format, observation layout, sizes,
     /// joint names and order, action scale and clip, and control rate must all agree. Returns
-    /// how many leading observation values the policy reads: [`OBSERVATION_DIM`], [`LEAD_DIM`]
-    /// for a skill of format `kumi-skill/arm-reach/2` or [`BASE_DIM`] for `/1`.
+    /// how many leading observation values the policy reads: [`OBSERVATION_DIM`], [`TOOL_DIM`]
+    /// for a skill of format `kumi-skill/arm-reach/3`, [`LEAD_DIM`] for `/2` or [`BASE_DIM`]
+    /// for `/1`.
     pub fn check(&self, found: &BTreeMap<String, String>) -> Result<usize, MetadataMismatch> {
         // Keys are checked in a fixed order so that the first error names the root cause
         // (a foreign file fails on its format, not on some later key).
         let observation_dim = match found.get(metadata::FORMAT).map(String::as_str) {
             Some(metadata::ARM_REACH_FORMAT_BASE) => BASE_DIM,
             Some(metadata::ARM_REACH_FORMAT_LEAD) => LEAD_DIM,
+            Some(metadata::ARM_REACH_FORMAT_TOOL) => TOOL_DIM,
             _ => OBSERVATION_DIM,
         };
         let contract = self.contract(observation_dim);
@@ -266,8 +271,11 @@ mod tests {
             m[metadata::ACTION_SCALE],
             "0.05,0.05,0.05,0.05,0.05,0.05,0.05"
         );
-        assert_eq!(m[metadata::OBSERVATION_DIM_KEY], "34");
+        assert_eq!(m[metadata::OBSERVATION_DIM_KEY], "41");
         assert_eq!(skill.check(&m), Ok(OBSERVATION_DIM));
+        let tool = skill.metadata(TOOL_DIM, "abc", 10);
+        assert_eq!(tool[metadata::FORMAT], metadata::ARM_REACH_FORMAT_TOOL);
+        assert_eq!(skill.check(&tool), Ok(TOOL_DIM));
         let lead = skill.metadata(LEAD_DIM, "abc", 10);
         assert_eq!(lead[metadata::FORMAT], metadata::ARM_REACH_FORMAT_LEAD);
         assert_eq!(skill.check(&lead), Ok(LEAD_DIM));

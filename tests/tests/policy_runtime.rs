@@ -44,11 +44,11 @@ fn use_onnxruntime() {
 }
 
 #[test]
-fn skills_of_the_first_formats_read_the_leading_21_or_28_values() {
-    use kumi_policies::observation::{BASE_DIM, LEAD_DIM};
+fn skills_of_the_first_formats_read_the_leading_21_28_or_34_values() {
+    use kumi_policies::observation::{BASE_DIM, LEAD_DIM, TOOL_DIM};
     use_onnxruntime();
     let skill = arm_skill(30.0);
-    for prefix in [BASE_DIM, LEAD_DIM] {
+    for prefix in [BASE_DIM, LEAD_DIM, TOOL_DIM] {
         reads_the_leading(prefix, &skill);
     }
 }
@@ -161,7 +161,8 @@ fn a_model_of_the_wrong_shape_is_refused() {
     let text = err.to_string();
     assert!(matches!(err, RuntimeError::Shape { .. }), "{text}");
     assert!(
-        text.contains("the input has shape [batch, 20]") && text.contains("[batch, 34]"),
+        text.contains("the input has shape [batch, 20]")
+            && text.contains(&format!("[batch, {OBSERVATION_DIM}]")),
         "{text}"
     );
 }

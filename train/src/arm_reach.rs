@@ -61,22 +61,27 @@ pub struct SkillObservation {
     /// goal's, after the lead (format `kumi-skill/arm-reach/3`; needs `targets_lead`).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub tool_error: bool,
+    /// The damped least-squares joint step toward the goal, after the tool's error (format
+    /// `kumi-skill/arm-reach/4`; needs `tool_error`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub joint_step: bool,
 }
 
 impl SkillObservation {
     /// Table I's observation (the section left out).
     pub fn is_table_i(&self) -> bool {
-        !self.targets_lead && !self.tool_error
+        !self.targets_lead && !self.tool_error && !self.joint_step
     }
 
     /// How many leading observation values this choice reads, or why it is not a layout.
     pub fn observation_dim(&self) -> Result<usize, EnvError> {
-        match (self.targets_lead, self.tool_error) {
-            (false, false) => Ok(observation::BASE_DIM),
-            (true, false) => Ok(observation::LEAD_DIM),
-            (true, true) => Ok(OBSERVATION_DIM),
-            (false, true) => Err(EnvError::Observation(
-                "`tool_error = true` needs `targets_lead = true`: each skill format reads a prefix of one layout, and the tool's error comes after the targets' lead".into(),
+        match (self.targets_lead, self.tool_error, self.joint_step) {
+            (false, false, false) => Ok(observation::BASE_DIM),
+            (true, false, false) => Ok(observation::LEAD_DIM),
+            (true, true, false) => Ok(observation::TOOL_DIM),
+            (true, true, true) => Ok(OBSERVATION_DIM),
+            _ => Err(EnvError::Observation(
+                "`joint_step = true` needs `tool_error = true`, and `tool_error = true` needs `targets_lead = true`: each skill format reads a prefix of one layout, in that order".into(),
             )),
         }
     }
@@ -498,8 +503,8 @@ impl ArmReach {
     /// The observation the policy sees now (with the noisy goal).
     pub fn observation(&self) -> [f32; OBSERVATION_DIM] {
         let (q, qd) = self.joints();
-        let tool_b = self.kinematics.tool_pose_b(&q);
-        observation::build(&q, &qd, &self.targets(), &self.observed_goal, &tool_b)
+        let fk = |q: &[f64; JOINTS]| self.kinematics.tool_pose_b(q);
+        observation::build(&q, &qd, &self.targets(), &self.observed_goal, &fk)
     }
 
     /// The joints' position targets [rad], which the skill's increments move.
@@ -572,13 +577,9 @@ impl ArmReach {
         }
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
         StepOutcome {
-            observation: observation::build(
-                &q,
-                &qd,
-                &targets,
-                &self.observed_goal,
-                &self.kinematics.tool_pose_b(&q),
-            ),
+            observation: observation::build(&q, &qd, &targets, &self.observed_goal, &|q| {
+                self.kinematics.tool_pose_b(q)
+            }),
             reward: terms.total(),
             terms,
             truncated: self.step >= self.config.episode_steps,

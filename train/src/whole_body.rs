@@ -658,9 +658,8 @@ impl WholeBody {
                 let at = |v: &[f64]| -> [f64; JOINTS] {
                     std::array::from_fn(|j| v[arm.joints.start + j])
                 };
-                let q = at(&q);
-                let tool_b = arm.kinematics.tool_pose_b(&q);
-                skill_obs::build(&q, &at(&qd), &at(&targets), goal, &tool_b)
+                let fk = |q: &[f64; JOINTS]| arm.kinematics.tool_pose_b(q);
+                skill_obs::build(&at(&q), &at(&qd), &at(&targets), goal, &fk)
             })
             .collect()
     }

@@ -158,22 +158,61 @@ fn the_observation_is_the_world_state_and_the_noisy_goal() {
 }
 
 #[test]
-fn the_tool_error_is_observed_only_after_the_lead() {
+fn the_tool_error_is_observed_only_after_the_lead_and_the_joint_step_after_it() {
     use kumi_train::arm_reach::SkillObservation;
-    let config = |targets_lead, tool_error| ArmReachConfig {
+    let config = |targets_lead, tool_error, joint_step| ArmReachConfig {
         observation: SkillObservation {
             targets_lead,
             tool_error,
+            joint_step,
         },
         ..ArmReachConfig::default()
     };
     let dim =
         |c: ArmReachConfig| ArmReach::new(model("arm"), c, 0).map(|e| e.config().observation_dim());
-    assert_eq!(dim(config(false, false)).unwrap(), 21);
-    assert_eq!(dim(config(true, false)).unwrap(), 28);
-    assert_eq!(dim(config(true, true)).unwrap(), 34);
-    let err = dim(config(false, true)).unwrap_err().to_string();
-    assert!(err.contains("targets_lead"), "{err}");
+    assert_eq!(dim(config(false, false, false)).unwrap(), 21);
+    assert_eq!(dim(config(true, false, false)).unwrap(), 28);
+    assert_eq!(dim(config(true, true, false)).unwrap(), 34);
+    assert_eq!(dim(config(true, true, true)).unwrap(), 41);
+    for skipped in [config(false, true, false), config(true, false, true)] {
+        let err = dim(skipped).unwrap_err().to_string();
+        assert!(err.contains("needs"), "{err}");
+    }
+}
+
+#[test]
+fn the_joint_step_leads_the_arm_to_a_reachable_goal() {
+    // Following the observed step (at most the skill's largest increment per control step)
+    // brings the tool to a goal the arm can reach: the feature means what it says.
+    use kumi_policies::kinematics::ToolKinematics;
+    use kumi_policies::observation::{build, OBSERVATION_DIM, TOOL_DIM};
+    let arm = model("arm");
+    let fk = ToolKinematics::new(&arm, &arm.modules[0]).unwrap();
+    let tool_pose_b = |q: &[f64; 7]| fk.tool_pose_b(q);
+    let target = [0.4, -0.6, 0.3, -1.2, 0.2, 0.8, -0.3];
+    let pose = fk.tool_pose_b(&target);
+    let goal = kumi_policies::observation::Goal {
+        position_b: pose.translation.vector,
+        orientation_b: pose.rotation,
+    };
+    let mut q = [0.0; 7];
+    for _ in 0..300 {
+        let obs = build(&q, &[0.0; 7], &q, &goal, &tool_pose_b);
+        for j in 0..7 {
+            q[j] += f64::from(obs[TOOL_DIM + j]).clamp(-0.05, 0.05);
+        }
+    }
+    let obs = build(&q, &[0.0; 7], &q, &goal, &tool_pose_b);
+    let error_m = f64::from(obs[28])
+        .hypot(f64::from(obs[29]))
+        .hypot(f64::from(obs[30]));
+    assert!(error_m < 1e-3, "{error_m} m left, at {q:?}");
+    assert!(
+        obs[TOOL_DIM..OBSERVATION_DIM]
+            .iter()
+            .all(|s| s.abs() < 1e-3),
+        "{obs:?}"
+    );
 }
 
 #[test]

@@ -91,7 +91,7 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
         &std::array::from_fn(|j| qd_reach[j]),
         &reach.targets(),
         &goal,
-        &fk.tool_pose_b(&q_arm),
+        &|q| fk.tool_pose_b(q),
     );
     // The arm-reach environment's own observation is the same function's, for its own goal.
     assert_eq!(
@@ -101,7 +101,7 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
             &std::array::from_fn(|j| qd_reach[j]),
             &reach.targets(),
             &reach.observed_goal(),
-            &fk.tool_pose_b(&q_arm),
+            &|q| fk.tool_pose_b(q),
         )
     );
 
@@ -710,7 +710,7 @@ fn excursion_from_home(home: [f64; 7]) -> Vec<f64> {
             &std::array::from_fn(|j| qd[j]),
             &std::array::from_fn(|j| targets[j]),
             &goal,
-            &kinematics.tool_pose_b(&q),
+            &|q| kinematics.tool_pose_b(q),
         );
         let action = policy.act(&obs).unwrap();
         world

@@ -132,7 +132,7 @@ impl ArmController {
             &j.qd,
             &targets,
             self.goal.as_ref()?,
-            &(self.tool_pose_b)(&j.q),
+            &*self.tool_pose_b,
         ))
     }
 
@@ -283,7 +283,7 @@ mod tests {
                 &[0.0; 7],
                 &[0.98; 7],
                 &goal(),
-                &tool_pose_b(&[0.98; 7])
+                &tool_pose_b
             ))
         );
         // Targets accumulate while the policy runs ...

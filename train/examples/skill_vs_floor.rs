@@ -1,0 +1,153 @@
+//! How far a skill is from what the arm can reach: per goal of the paper's box (section IV-A),
+//! the skill's final errors set against a Jacobian controller's (the damped least-squares step
+//! of `kumi_policies::kinematics::damped_step_rad`, iterated within the joint limits) from the
+//! same start, and from the best of 16 random starts.
+//!
+//! `cargo run --release -p kumi-train --example skill_vs_floor -- SKILL.onnx [GOALS]`
+//! (rapier; MuJoCo with `--features kumi-worlds/mujoco` and `KUMI_ENGINE=mujoco`).
+
+use std::sync::Arc;
+
+use kumi_model::{assemble, load_morphology, ModuleLibrary};
+use kumi_policies::kinematics::{damped_step_rad, ToolKinematics};
+use kumi_policies::observation::{Goal, JOINTS};
+use kumi_policies::rotation::orientation_error;
+use kumi_policies::skill::ArmSkill;
+use kumi_runtime::{BackendChoice, SkillPolicy};
+use kumi_train::arm_reach::{ArmReach, ArmReachConfig};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+type Angles = [f64; JOINTS];
+/// Position [m] and orientation [rad] errors.
+type Errors = (f64, f64);
+
+/// The Jacobian controller run to rest from `start`.
+fn jacobian_controller(
+    fk: &ToolKinematics,
+    limits: &[(f64, f64); JOINTS],
+    goal: &Goal,
+    start: Angles,
+) -> Errors {
+    let tool_pose_b = |q: &Angles| fk.tool_pose_b(q);
+    let mut q = start;
+    for _ in 0..400 {
+        let step = damped_step_rad(&tool_pose_b, &q, goal);
+        q = std::array::from_fn(|j| (q[j] + step[j]).clamp(limits[j].0, limits[j].1));
+    }
+    let pose = fk.tool_pose_b(&q);
+    (
+        (goal.position_b - pose.translation.vector).norm(),
+        orientation_error(&goal.orientation_b, &pose.rotation),
+    )
+}
+
+struct Row {
+    skill: Errors,
+    local: Errors,
+    global: Errors,
+}
+
+fn report(name: &str, rows: &[&Row]) {
+    let mean =
+        |f: &dyn Fn(&Row) -> f64| rows.iter().map(|r| f(r)).sum::<f64>() / rows.len().max(1) as f64;
+    println!(
+        "| {name} | {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} |",
+        rows.len(),
+        mean(&|r| r.skill.0),
+        mean(&|r| r.skill.1),
+        mean(&|r| r.local.0),
+        mean(&|r| r.local.1),
+        mean(&|r| r.global.0),
+        mean(&|r| r.global.1),
+    );
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let path = std::path::PathBuf::from(
+        args.get(1)
+            .ok_or("usage: skill_vs_floor SKILL.onnx [GOALS]")?,
+    );
+    let goals: usize = args.get(2).map(|s| s.parse()).transpose()?.unwrap_or(300);
+    let engine = std::env::var("KUMI_ENGINE")
+        .unwrap_or_else(|_| "rapier".into())
+        .parse()?;
+    let library = ModuleLibrary::shipped();
+    let model = Arc::new(assemble(&load_morphology("arm", &library)?, &library));
+    let arm = &model.modules[0];
+    let fk = ToolKinematics::new(&model, arm)?;
+    let limits: Vec<_> = arm.position_joints().map(|a| (a.lower, a.upper)).collect();
+    let limits: [(f64, f64); JOINTS] = std::array::from_fn(|j| limits[j]);
+    let config = ArmReachConfig {
+        engine,
+        ..ArmReachConfig::default()
+    };
+    let mut env = ArmReach::new(model.clone(), config, 7)?;
+    let skill = ArmSkill::new(arm, 30.0)?;
+    let mut policy = SkillPolicy::load(&path, &skill, BackendChoice::Tract)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut rows = Vec::new();
+    let mut obs = env.reset();
+    let mut start: Angles = std::array::from_fn(|j| env.world().joint_positions()[j]);
+    while rows.len() < goals {
+        let goal = env.goal();
+        let out = env.step(&policy.act(&obs)?);
+        obs = out.observation;
+        if !out.goal_ended {
+            continue;
+        }
+        let mut global = (f64::INFINITY, f64::INFINITY);
+        for _ in 0..16 {
+            let s: Angles = std::array::from_fn(|j| rng.random_range(limits[j].0..limits[j].1));
+            let e = jacobian_controller(&fk, &limits, &goal, s);
+            if e.0 + 0.2 * e.1 < global.0 + 0.2 * global.1 {
+                global = e;
+            }
+        }
+        rows.push(Row {
+            skill: (out.position_error, out.orientation_error),
+            local: jacobian_controller(&fk, &limits, &goal, start),
+            global,
+        });
+        if out.truncated {
+            obs = env.reset();
+        }
+        start = std::array::from_fn(|j| env.world().joint_positions()[j]);
+    }
+    println!(
+        "{} on {engine}, {goals} goals of the paper's box",
+        path.display()
+    );
+    println!("\n| goals | n | skill: position [m] / orientation [rad] | Jacobian controller, same start | best of 16 starts |\n|---|---|---|---|---|");
+    let all: Vec<&Row> = rows.iter().collect();
+    let select =
+        |f: &dyn Fn(&Row) -> bool| all.iter().copied().filter(|r| f(r)).collect::<Vec<_>>();
+    let reached = |e: Errors| e.0 < 0.01 && e.1 < 0.05;
+    report("all", &all);
+    report(
+        "pose reachable (best start within 1 cm, 0.05 rad)",
+        &select(&|r| reached(r.global)),
+    );
+    report("pose out of reach", &select(&|r| !reached(r.global)));
+    report(
+        "reached from the same start",
+        &select(&|r| reached(r.local)),
+    );
+    report(
+        "not reached from the same start",
+        &select(&|r| !reached(r.local)),
+    );
+    let mut p: Vec<f64> = rows.iter().map(|r| r.skill.0).collect();
+    p.sort_by(f64::total_cmp);
+    let at = |q: f64| p[((p.len() - 1) as f64 * q).round() as usize];
+    println!(
+        "\nskill position error quantiles [m]: p10 {:.3}, p25 {:.3}, median {:.3}, p75 {:.3}, p90 {:.3}",
+        at(0.1),
+        at(0.25),
+        at(0.5),
+        at(0.75),
+        at(0.9)
+    );
+    Ok(())
+}
