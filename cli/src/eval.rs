@@ -451,6 +451,14 @@ pub struct EvalArmArgs {
     /// The training config whose `[goals]` define the working poses (default: the shipped one).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Standard deviation [m] of the noise on the goal position the skill observes, drawn
+    /// afresh every step (training's by default; 0 for a still goal).
+    #[arg(long, default_value_t = ArmReachConfig::default().goal_noise.position_std)]
+    pub goal_noise_m: f64,
+    /// Standard deviation [rad] of the noise on the goal orientation the skill observes, drawn
+    /// afresh every step (training's by default; 0 for a still goal).
+    #[arg(long, default_value_t = ArmReachConfig::default().goal_noise.orientation_std)]
+    pub goal_noise_rad: f64,
     /// Print one JSON object instead of a markdown table (an array for several engines or
     /// goal sets).
     #[arg(long)]
@@ -459,6 +467,19 @@ pub struct EvalArmArgs {
 
 fn run_arm(args: EvalArmArgs) -> Result<()> {
     anyhow::ensure!(args.rollouts > 0, "--rollouts must be positive");
+    for (flag, std) in [
+        ("--goal-noise-m", args.goal_noise_m),
+        ("--goal-noise-rad", args.goal_noise_rad),
+    ] {
+        anyhow::ensure!(
+            std.is_finite() && std >= 0.0,
+            "{flag} must be a standard deviation >= 0; got {std}"
+        );
+    }
+    let goal_noise = kumi_policies::goal::GoalNoise {
+        position_std: args.goal_noise_m,
+        orientation_std: args.goal_noise_rad,
+    };
     let path = args.policy.unwrap_or_else(kumi_runtime::shipped_arm_policy);
     let model = load_model("arm")?;
     let skill = ArmSkill::new(
@@ -477,12 +498,16 @@ fn run_arm(args: EvalArmArgs) -> Result<()> {
     };
     let shown = shown(&path);
     let provenance = format!(
-        "- policy: `{}` (trained for {} environment steps, config fingerprint {})\n- protocol: {} goals, each held 4 s (120 steps at {} Hz) in 12 s episodes from random initial joints, goal noise as in training; error at the end of each goal; episode seed {}\n- inference: {backend} backend\n",
+        "- policy: `{}` (trained for {} environment steps, config fingerprint {})\n- protocol: {} goals, each held 4 s (120 steps at {} Hz) in 12 s episodes from random initial joints, goal noise {} m and {} rad (training's: {} m, {} rad); error at the end of each goal; episode seed {}\n- inference: {backend} backend\n",
         shown,
         meta(kumi_policies::metadata::ENV_STEPS),
         meta(kumi_policies::metadata::CONFIG_HASH),
         args.rollouts,
         skill.control_hz,
+        args.goal_noise_m,
+        args.goal_noise_rad,
+        ArmReachConfig::default().goal_noise.position_std,
+        ArmReachConfig::default().goal_noise.orientation_std,
         args.seed,
     );
     drop(probe);
@@ -516,6 +541,7 @@ fn run_arm(args: EvalArmArgs) -> Result<()> {
                 } else {
                     GoalDistribution::paper()
                 },
+                goal_noise,
                 ..ArmReachConfig::default()
             },
             args.rollouts,

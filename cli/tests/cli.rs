@@ -670,6 +670,34 @@ fn eval_arm_prints_the_documented_json() {
             assert!(x.is_finite() && x >= 0.0, "{error}.{stat} = {x}");
         }
     }
+    // Training's goal noise unless asked otherwise.
+    assert_eq!(v["goal_noise"]["position_m"], 0.005);
+    assert_eq!(v["goal_noise"]["orientation_rad"], 0.01);
+}
+
+#[test]
+fn eval_arm_takes_a_still_goal_and_refuses_a_negative_noise() {
+    let still = kumi_ok(&[
+        "eval",
+        "arm",
+        "--rollouts",
+        "3",
+        "--goal-noise-m",
+        "0",
+        "--goal-noise-rad",
+        "0",
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_slice(&still.stdout).unwrap();
+    assert_eq!(v["goal_noise"]["position_m"], 0.0);
+    assert_eq!(v["goal_noise"]["orientation_rad"], 0.0);
+    let out = kumi(&["eval", "arm", "--goal-noise-rad=-0.1"]);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--goal-noise-rad must be a standard deviation >= 0; got -0.1"),
+        "{stderr}"
+    );
 }
 
 #[test]

@@ -127,6 +127,17 @@ pub struct Evaluation {
     /// ends ([`settle_steps`]).
     #[serde(default = "ErrorStats::empty")]
     pub settle_time_s: ErrorStats,
+    /// The standard deviations of the noise drawn afresh at every step on the goal the skill
+    /// observes: position [m] and orientation [rad].
+    #[serde(default)]
+    pub goal_noise: GoalNoiseStd,
+}
+
+/// The goal noise of an evaluation, as its JSON reports it.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct GoalNoiseStd {
+    pub position_m: f64,
+    pub orientation_rad: f64,
 }
 
 impl Evaluation {
@@ -134,7 +145,7 @@ impl Evaluation {
     pub fn markdown(&self) -> String {
         let row = ErrorStats::markdown_row;
         format!(
-            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}{}\naction values past the +-{ACTION_LIMIT} they are clipped to: {:.1} %\nhold, last {HOLD_WINDOW_S} s of each goal: mean increment {:.1} % of the largest; sign reversals above 20 % of it at {:.1} % of the steps\n{}",
+            "| final error ({} rollouts, {} goals, {}) | mean | std | median | p90 |\n|---|---|---|---|---|\n{}{}{}\naction values past the +-{ACTION_LIMIT} they are clipped to: {:.1} %\nhold, last {HOLD_WINDOW_S} s of each goal: mean increment {:.1} % of the largest; sign reversals above 20 % of it at {:.1} % of the steps\ngoal noise: {} m, {} rad (standard deviations, drawn afresh every step)\n{}",
             self.rollouts,
             self.goals,
             self.engine,
@@ -144,6 +155,8 @@ impl Evaluation {
             100.0 * self.action_values_past_limit,
             100.0 * self.hold_increment_share,
             100.0 * self.hold_reversal_share,
+            self.goal_noise.position_m,
+            self.goal_noise.orientation_rad,
             match self.diverged_episodes {
                 0 => String::new(),
                 n => format!("episodes cut short by physics that blew up: {n}\n"),
@@ -221,6 +234,10 @@ where
         hold_increment_share: hold.mean_increment_share(),
         hold_reversal_share: hold.reversal_share(),
         settle_time_s: ErrorStats::of(&settle),
+        goal_noise: GoalNoiseStd {
+            position_m: config.goal_noise.position_std,
+            orientation_rad: config.goal_noise.orientation_std,
+        },
     })
 }
 
@@ -344,8 +361,15 @@ mod tests {
             hold_increment_share: 0.5,
             hold_reversal_share: 0.125,
             settle_time_s: ErrorStats::of(&[1.0, 2.0]),
+            goal_noise: GoalNoiseStd {
+                position_m: 0.005,
+                orientation_rad: 0.0,
+            },
         };
         let v: serde_json::Value = serde_json::to_value(&e).unwrap();
+        assert_eq!(v["goal_noise"]["position_m"], 0.005);
+        assert_eq!(v["goal_noise"]["orientation_rad"], 0.0);
+        assert!(e.markdown().contains("goal noise: 0.005 m, 0 rad"));
         assert_eq!(v["rollouts"], 2);
         assert_eq!(v["engine"], "rapier");
         for key in ["mean", "std", "median", "p90"] {
