@@ -1,7 +1,9 @@
 //! How far a skill is from what the arm can reach: per goal of the paper's box (section IV-A),
 //! the skill's final errors set against a Jacobian controller's (the damped least-squares step
 //! of `kumi_policies::kinematics::damped_step_rad`, iterated within the joint limits) from the
-//! same start, and from the best of 16 random starts.
+//! same start, and from the best of 16 random starts; and, of the goals the controller reaches
+//! from the same start while the skill ends more than 7 cm away, on how many the skill left a
+//! joint at its limit.
 //!
 //! `cargo run --release -p kumi-train --example skill_vs_floor -- SKILL.onnx [GOALS]`
 //! (rapier; MuJoCo with `--features kumi-worlds/mujoco` and `KUMI_ENGINE=mujoco`).
@@ -46,6 +48,8 @@ struct Row {
     skill: Errors,
     local: Errors,
     global: Errors,
+    /// The joints within 0.02 rad of a limit where the skill ended the goal.
+    at_limit: Vec<usize>,
 }
 
 fn report(name: &str, rows: &[&Row]) {
@@ -105,10 +109,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 global = e;
             }
         }
+        let q = env.world().joint_positions();
+        let at_limit = (0..JOINTS)
+            .filter(|&j| (q[j] - limits[j].0).min(limits[j].1 - q[j]) < 0.02)
+            .collect();
         rows.push(Row {
             skill: (out.position_error, out.orientation_error),
             local: jacobian_controller(&fk, &limits, &goal, start),
             global,
+            at_limit,
         });
         if out.truncated {
             obs = env.reset();
@@ -137,6 +146,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     report(
         "not reached from the same start",
         &select(&|r| !reached(r.local)),
+    );
+    let stuck = select(&|r| reached(r.local) && r.skill.0 > 0.07);
+    let mut per_joint = [0; JOINTS];
+    for j in stuck.iter().flat_map(|r| &r.at_limit) {
+        per_joint[*j] += 1;
+    }
+    println!(
+        "\nthe skill ends more than 7 cm away from {} goals the controller reaches from the same start; on {} of them a joint ends within 0.02 rad of its limit (per joint 1-7: {per_joint:?})",
+        stuck.len(),
+        stuck.iter().filter(|r| !r.at_limit.is_empty()).count(),
     );
     let mut p: Vec<f64> = rows.iter().map(|r| r.skill.0).collect();
     p.sort_by(f64::total_cmp);
