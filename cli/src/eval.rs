@@ -497,6 +497,7 @@ fn run_arm(args: EvalArmArgs) -> Result<()> {
             .unwrap_or_else(|| "?".into())
     };
     let shown = shown(&path);
+    let training_noise = ArmReachConfig::default().goal_noise;
     let provenance = format!(
         "- policy: `{}` (trained for {} environment steps, config fingerprint {})\n- protocol: {} goals, each held 4 s (120 steps at {} Hz) in 12 s episodes from random initial joints, goal noise {} m and {} rad (training's: {} m, {} rad); error at the end of each goal; episode seed {}\n- inference: {backend} backend\n",
         shown,
@@ -506,8 +507,8 @@ fn run_arm(args: EvalArmArgs) -> Result<()> {
         skill.control_hz,
         args.goal_noise_m,
         args.goal_noise_rad,
-        ArmReachConfig::default().goal_noise.position_std,
-        ArmReachConfig::default().goal_noise.orientation_std,
+        training_noise.position_std,
+        training_noise.orientation_std,
         args.seed,
     );
     drop(probe);

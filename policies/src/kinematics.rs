@@ -3,7 +3,7 @@
 
 use kumi_model::kinematics::{joint_motion, KinematicTree, TreeJoint};
 use kumi_model::{ModuleInstance, RobotModel};
-use nalgebra::{Isometry3, SMatrix, Vector6};
+use nalgebra::{Isometry3, SMatrix, Vector3, Vector6};
 
 use crate::observation::{Goal, JOINTS};
 use crate::rotation::canonical;
@@ -97,13 +97,20 @@ impl ToolKinematics {
     }
 }
 
-/// The tool's error to `goal` at pose `tool_b`, weighted: the goal's position less the tool's
-/// [m], then [`STEP_ORIENTATION_WEIGHT_M_PER_RAD`] times the rotation from the tool's
-/// orientation to the goal's as a rotation vector (both in the arm base frame).
+/// The tool's error to `goal` at pose `tool_b`, both in the arm base frame: the goal's position
+/// less the tool's [m], and the rotation from the tool's orientation to the goal's as a rotation
+/// vector [rad]. The observation's tool error and [`damped_step_rad`] both use it.
+pub fn tool_error_b(goal: &Goal, tool_b: &Isometry3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    (
+        goal.position_b - tool_b.translation.vector,
+        canonical(&(goal.orientation_b * tool_b.rotation.inverse())).scaled_axis(),
+    )
+}
+
+/// [`tool_error_b`] as one vector, the rotation weighed by [`STEP_ORIENTATION_WEIGHT_M_PER_RAD`].
 fn weighted_error(goal: &Goal, tool_b: &Isometry3<f64>) -> Vector6<f64> {
-    let dp = goal.position_b - tool_b.translation.vector;
-    let dr = canonical(&(goal.orientation_b * tool_b.rotation.inverse())).scaled_axis()
-        * STEP_ORIENTATION_WEIGHT_M_PER_RAD;
+    let (dp, rotation) = tool_error_b(goal, tool_b);
+    let dr = rotation * STEP_ORIENTATION_WEIGHT_M_PER_RAD;
     Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z)
 }
 
@@ -142,7 +149,7 @@ pub fn damped_step_rad(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{UnitQuaternion, Vector3};
+    use nalgebra::UnitQuaternion;
 
     /// A stand-in arm: the tool at (q1, q2, q3), turned q4 about x; q5..q7 move nothing.
     fn stand_in(q: &[f64; JOINTS]) -> Isometry3<f64> {

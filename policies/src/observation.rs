@@ -19,7 +19,7 @@
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
-use crate::kinematics::damped_step_rad;
+use crate::kinematics::{damped_step_rad, tool_error_b};
 use crate::rotation::canonical;
 
 /// Joints of an arm module.
@@ -103,7 +103,6 @@ pub fn build(
     goal: &Goal,
     tool_pose_b: &dyn Fn(&[f64; JOINTS]) -> Isometry3<f64>,
 ) -> [f32; OBSERVATION_DIM] {
-    let tool_b = tool_pose_b(q);
     let mut obs = [0.0_f32; OBSERVATION_DIM];
     for i in 0..JOINTS {
         obs[i] = q[i] as f32;
@@ -119,8 +118,7 @@ pub fn build(
     obs[18] = o.i as f32;
     obs[19] = o.j as f32;
     obs[20] = o.k as f32;
-    let to_goal_b = goal.position_b - tool_b.translation.vector;
-    let rotation_b = canonical(&(goal.orientation_b * tool_b.rotation.inverse())).scaled_axis();
+    let (to_goal_b, rotation_b) = tool_error_b(goal, &tool_pose_b(q));
     for i in 0..3 {
         obs[LEAD_DIM + i] = to_goal_b[i] as f32;
         obs[LEAD_DIM + 3 + i] = rotation_b[i] as f32;

@@ -11,7 +11,9 @@
 use std::sync::Arc;
 
 use kumi_model::{assemble, load_morphology, ModuleLibrary};
-use kumi_policies::kinematics::{damped_step_rad, ToolKinematics};
+use kumi_policies::kinematics::{
+    damped_step_rad, ToolKinematics, STEP_ORIENTATION_WEIGHT_M_PER_RAD,
+};
 use kumi_policies::observation::{Goal, JOINTS};
 use kumi_policies::rotation::orientation_error;
 use kumi_policies::skill::ArmSkill;
@@ -105,7 +107,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for _ in 0..16 {
             let s: Angles = std::array::from_fn(|j| rng.random_range(limits[j].0..limits[j].1));
             let e = jacobian_controller(&fk, &limits, &goal, s);
-            if e.0 + 0.2 * e.1 < global.0 + 0.2 * global.1 {
+            let cost = |e: Errors| e.0 + STEP_ORIENTATION_WEIGHT_M_PER_RAD * e.1;
+            if cost(e) < cost(global) {
                 global = e;
             }
         }
