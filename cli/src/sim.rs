@@ -215,6 +215,7 @@ impl SkillDriver {
             &self.at(&targets),
             &self.goal,
             &fk,
+            self.kinematics.limits_rad(),
         );
         let action = self.policy.act(&observation)?;
         let increments = self.skill.increments(&action);

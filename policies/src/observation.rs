@@ -93,8 +93,9 @@ pub struct Goal {
 /// Builds the observation: `q` [rad] and `qd` [rad/s] in the module's joint order, the goal in
 /// the arm base frame, the joints' position targets [rad] (what the servos are commanded
 /// to, which the skill's increments move), and the module's forward kinematics
-/// (`tool_pose_b`: the tool pose in the arm base frame from joint angles), which give the
-/// tool's error and the joint step. The goal quaternion is written with a non-negative
+/// (`tool_pose_b`: the tool pose in the arm base frame from joint angles) and joint limits
+/// (`limits_rad`, (lower, upper) per joint), which give the tool's error and the joint step
+/// ([`damped_step_rad`]). The goal quaternion is written with a non-negative
 /// scalar part. Values are rounded to f32 here, once, for both training and deployment.
 pub fn build(
     q: &[f64; JOINTS],
@@ -102,6 +103,7 @@ pub fn build(
     targets: &[f64; JOINTS],
     goal: &Goal,
     tool_pose_b: &dyn Fn(&[f64; JOINTS]) -> Isometry3<f64>,
+    limits_rad: &[(f64, f64); JOINTS],
 ) -> [f32; OBSERVATION_DIM] {
     let mut obs = [0.0_f32; OBSERVATION_DIM];
     for i in 0..JOINTS {
@@ -123,7 +125,10 @@ pub fn build(
         obs[LEAD_DIM + i] = to_goal_b[i] as f32;
         obs[LEAD_DIM + 3 + i] = rotation_b[i] as f32;
     }
-    for (j, step) in damped_step_rad(tool_pose_b, q, goal).iter().enumerate() {
+    for (j, step) in damped_step_rad(tool_pose_b, limits_rad, q, goal)
+        .iter()
+        .enumerate()
+    {
         obs[TOOL_DIM + j] = *step as f32;
     }
     obs
@@ -149,7 +154,14 @@ mod tests {
             Vector3::new(0.15, -0.125, 1.0).into(),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.2),
         );
-        let obs = build(&q, &qd, &targets, &goal, &|_| tool_b);
+        let obs = build(
+            &q,
+            &qd,
+            &targets,
+            &goal,
+            &|_| tool_b,
+            &[(-3.0, 3.0); JOINTS],
+        );
         assert_eq!(&obs[..7], &[0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7]);
         assert_eq!(&obs[7..14], &[-1.0, -2.0, -3.0, -4.0, -5.0, -6.0, -7.0]);
         assert_eq!(&obs[14..17], &[0.25, -0.125, 1.0]);
@@ -191,6 +203,7 @@ mod tests {
             &[0.0; JOINTS],
             &goal,
             &|_| tool_b,
+            &[(-3.0, 3.0); JOINTS],
         );
         assert!(obs[LEAD_DIM..].iter().all(|v| v.abs() < 1e-6), "{obs:?}");
     }

@@ -36,7 +36,7 @@ fn jacobian_controller(
     let tool_pose_b = |q: &Angles| fk.tool_pose_b(q);
     let mut q = start;
     for _ in 0..400 {
-        let step = damped_step_rad(&tool_pose_b, &q, goal);
+        let step = damped_step_rad(&tool_pose_b, limits, &q, goal);
         q = std::array::from_fn(|j| (q[j] + step[j]).clamp(limits[j].0, limits[j].1));
     }
     let pose = fk.tool_pose_b(&q);

@@ -504,7 +504,8 @@ impl ArmReach {
     pub fn observation(&self) -> [f32; OBSERVATION_DIM] {
         let (q, qd) = self.joints();
         let fk = |q: &[f64; JOINTS]| self.kinematics.tool_pose_b(q);
-        observation::build(&q, &qd, &self.targets(), &self.observed_goal, &fk)
+        let limits = self.kinematics.limits_rad();
+        observation::build(&q, &qd, &self.targets(), &self.observed_goal, &fk, limits)
     }
 
     /// The joints' position targets [rad], which the skill's increments move.
@@ -577,9 +578,14 @@ impl ArmReach {
         }
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
         StepOutcome {
-            observation: observation::build(&q, &qd, &targets, &self.observed_goal, &|q| {
-                self.kinematics.tool_pose_b(q)
-            }),
+            observation: observation::build(
+                &q,
+                &qd,
+                &targets,
+                &self.observed_goal,
+                &|q| self.kinematics.tool_pose_b(q),
+                self.kinematics.limits_rad(),
+            ),
             reward: terms.total(),
             terms,
             truncated: self.step >= self.config.episode_steps,

@@ -659,7 +659,8 @@ impl WholeBody {
                     std::array::from_fn(|j| v[arm.joints.start + j])
                 };
                 let fk = |q: &[f64; JOINTS]| arm.kinematics.tool_pose_b(q);
-                skill_obs::build(&at(&q), &at(&qd), &at(&targets), goal, &fk)
+                let limits = arm.kinematics.limits_rad();
+                skill_obs::build(&at(&q), &at(&qd), &at(&targets), goal, &fk, limits)
             })
             .collect()
     }

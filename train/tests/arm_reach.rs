@@ -197,12 +197,12 @@ fn the_joint_step_leads_the_arm_to_a_reachable_goal() {
     };
     let mut q = [0.0; 7];
     for _ in 0..300 {
-        let obs = build(&q, &[0.0; 7], &q, &goal, &tool_pose_b);
+        let obs = build(&q, &[0.0; 7], &q, &goal, &tool_pose_b, fk.limits_rad());
         for j in 0..7 {
             q[j] += f64::from(obs[TOOL_DIM + j]).clamp(-0.05, 0.05);
         }
     }
-    let obs = build(&q, &[0.0; 7], &q, &goal, &tool_pose_b);
+    let obs = build(&q, &[0.0; 7], &q, &goal, &tool_pose_b, fk.limits_rad());
     let error_m = f64::from(obs[28])
         .hypot(f64::from(obs[29]))
         .hypot(f64::from(obs[30]));

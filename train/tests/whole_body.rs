@@ -92,6 +92,7 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
         &reach.targets(),
         &goal,
         &|q| fk.tool_pose_b(q),
+        fk.limits_rad(),
     );
     // The arm-reach environment's own observation is the same function's, for its own goal.
     assert_eq!(
@@ -102,6 +103,7 @@ fn each_module_sees_what_the_arm_reach_environment_builds_bit_for_bit() {
             &reach.targets(),
             &reach.observed_goal(),
             &|q| fk.tool_pose_b(q),
+            fk.limits_rad(),
         )
     );
 
@@ -711,6 +713,7 @@ fn excursion_from_home(home: [f64; 7]) -> Vec<f64> {
             &std::array::from_fn(|j| targets[j]),
             &goal,
             &|q| kinematics.tool_pose_b(q),
+            kinematics.limits_rad(),
         );
         let action = policy.act(&obs).unwrap();
         world

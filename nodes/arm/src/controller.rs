@@ -58,6 +58,8 @@ pub struct ArmController {
     skill: ArmSkill,
     actuators: Vec<Actuator>,
     tool_pose_b: ToolFn,
+    /// The joints' limits [rad], (lower, upper), in the skill's joint order.
+    limits_rad: [(f64, f64); JOINTS],
     policy: PolicyFn,
     stale_after_s: f64,
     goal: Option<Goal>,
@@ -69,8 +71,8 @@ pub struct ArmController {
 
 impl ArmController {
     /// A controller for the module `skill` describes, with its position `actuators` (for the
-    /// joint limits), its forward kinematics, a policy, and the joint-state age [s] beyond
-    /// which it holds.
+    /// joint limits; the skill's [`JOINTS`], in its order), its forward kinematics, a policy,
+    /// and the joint-state age [s] beyond which it holds.
     pub fn new(
         skill: ArmSkill,
         actuators: Vec<Actuator>,
@@ -78,10 +80,12 @@ impl ArmController {
         policy: PolicyFn,
         stale_after_s: f64,
     ) -> Self {
+        let limits_rad = std::array::from_fn(|j| (actuators[j].lower, actuators[j].upper));
         Self {
             skill,
             actuators,
             tool_pose_b,
+            limits_rad,
             policy,
             stale_after_s,
             goal: None,
@@ -133,6 +137,7 @@ impl ArmController {
             &targets,
             self.goal.as_ref()?,
             &*self.tool_pose_b,
+            &self.limits_rad,
         ))
     }
 
@@ -283,7 +288,8 @@ mod tests {
                 &[0.0; 7],
                 &[0.98; 7],
                 &goal(),
-                &tool_pose_b
+                &tool_pose_b,
+                &[(-1.0, 1.0); JOINTS],
             ))
         );
         // Targets accumulate while the policy runs ...
