@@ -336,7 +336,15 @@ def cmd_reach(args, peer):
     peer.listen(PoseStamped, ee_topic)
     peer.listen(Clock, f"/{r}/clock")
     goal = peer.create_publisher(PoseStamped, f"/{r}/{a}/goal_pose", DEFAULT)
-    if not peer.spin_until(lambda: ee_topic in peer.latest and (args.wall or f"/{r}/clock" in peer.latest) and goal.get_subscription_count() > 0, args.timeout):
+    # --record: every increment the arm node sends from the goal on, for hold smoothness (a
+    # history deep enough that none is dropped while this peer is busy). The node sends zeros
+    # while it holds without a goal: one received says its writer has matched this reader.
+    increments = []
+    recorder = args.record and peer.create_subscription(
+        Float64MultiArray, f"/{r}/{a}/joint_increments", lambda m: increments.append(list(m.data)),
+        QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    if not peer.spin_until(lambda: ee_topic in peer.latest and (args.wall or f"/{r}/clock" in peer.latest) and goal.get_subscription_count() > 0
+                           and (not recorder or len(increments) > 0), args.timeout):
         return {"error": "arm node or bridge not found"}
     if args.wall:  # on hardware there is no /clock: wall time
         sim = time.monotonic
@@ -357,6 +365,7 @@ def cmd_reach(args, peer):
     target = [float(v) for v in args.goal.split(",")]
     p0 = peer.latest[ee_topic].pose.position
     msg = goal_msg(target, args.frame)
+    increments.clear()
     goal.publish(msg)
     # The publisher has matched the node's reader, but the node's reader may not yet have
     # matched this writer (DDS discovery runs both ways at its own pace), and a sample sent in
@@ -379,7 +388,8 @@ def cmd_reach(args, peer):
     p, o = ee.pose.position, ee.pose.orientation
     return {"start": start, "end": sim(), "wall_s": time.monotonic() - wall, "start_position": [p0.x, p0.y, p0.z],
             "position": [p.x, p.y, p.z], "goal_sends": resend["sends"],
-            "orientation": [o.w, o.x, o.y, o.z], "frame": ee.header.frame_id}
+            "orientation": [o.w, o.x, o.y, o.z], "frame": ee.header.frame_id,
+            "increments": increments}
 
 
 def yaw_of(o):
@@ -1018,6 +1028,7 @@ def main():
     p.add_argument("--frame", default="")
     p.add_argument("--within", type=float, default=0.0)
     p.add_argument("--wall", action="store_true")
+    p.add_argument("--record", action="store_true", help="reach: report the arm node's increments after the goal")
     p.add_argument("--expect", default="", help="target: comma-separated /diagnostics status names to wait for after the drive")
     args = p.parse_args()
     if args.command == "latency":
