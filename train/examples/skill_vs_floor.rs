@@ -7,6 +7,10 @@
 //!
 //! `cargo run --release -p kumi-train --example skill_vs_floor -- SKILL.onnx [GOALS]`
 //! (rapier; MuJoCo with `--features kumi-worlds/mujoco` and `KUMI_ENGINE=mujoco`).
+//!
+//! In place of `SKILL.onnx`, `step:GAIN` runs a step follower through the same physics: at
+//! every control step it commands GAIN times the joint step the skill observes (as increments,
+//! clipped to the skill's largest), what a skill that had learnt to follow its step would do.
 
 use std::sync::Arc;
 
@@ -14,7 +18,7 @@ use kumi_model::{assemble, load_morphology, ModuleLibrary};
 use kumi_policies::kinematics::{
     damped_step_rad, ToolKinematics, STEP_ORIENTATION_WEIGHT_M_PER_RAD,
 };
-use kumi_policies::observation::{Goal, JOINTS};
+use kumi_policies::observation::{Goal, JOINTS, OBSERVATION_DIM, TOOL_DIM};
 use kumi_policies::rotation::orientation_error;
 use kumi_policies::skill::ArmSkill;
 use kumi_runtime::{BackendChoice, SkillPolicy};
@@ -44,6 +48,26 @@ fn jacobian_controller(
         (goal.position_b - pose.translation.vector).norm(),
         orientation_error(&goal.orientation_b, &pose.rotation),
     )
+}
+
+/// What acts on the arm: a skill, or a follower of the observed step with its gain.
+enum Actor {
+    Skill(SkillPolicy),
+    StepFollower { gain: f64, skill: ArmSkill },
+}
+
+impl Actor {
+    fn act(
+        &mut self,
+        obs: &[f32; OBSERVATION_DIM],
+    ) -> Result<[f32; JOINTS], Box<dyn std::error::Error>> {
+        Ok(match self {
+            Actor::Skill(policy) => policy.act(obs)?,
+            Actor::StepFollower { gain, skill } => std::array::from_fn(|j| {
+                (*gain * f64::from(obs[TOOL_DIM + j]) / skill.increment_scale[j]) as f32
+            }),
+        })
+    }
 }
 
 struct Row {
@@ -91,7 +115,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let mut env = ArmReach::new(model.clone(), config, 7)?;
     let skill = ArmSkill::new(arm, 30.0)?;
-    let mut policy = SkillPolicy::load(&path, &skill, BackendChoice::Tract)?;
+    let mut policy = match path.to_str().and_then(|p| p.strip_prefix("step:")) {
+        Some(gain) => Actor::StepFollower {
+            gain: gain.parse()?,
+            skill: skill.clone(),
+        },
+        None => Actor::Skill(SkillPolicy::load(&path, &skill, BackendChoice::Tract)?),
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     let mut rows = Vec::new();
     let mut obs = env.reset();
