@@ -9,7 +9,9 @@ use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use kumi_terms::action::{GoalBounds, JointBounds};
 use kumi_terms::ObservationOptions;
-use kumi_train::arm_reach::{ArmReach, ArmReachConfig, GoalConfig, SkillObservation, ToolLoad};
+use kumi_train::arm_reach::{
+    ArmReach, ArmReachConfig, GoalConfig, SkillAction, SkillObservation, ToolLoad,
+};
 use kumi_train::body_reward::{BodyWeights, PenaltyWeights};
 use kumi_train::env::Environment;
 use kumi_train::noise::ObservationNoise;
@@ -36,6 +38,9 @@ pub struct TrainArmConfig {
     /// What the skill observes; Table I's 21 values when absent.
     #[serde(default, skip_serializing_if = "SkillObservation::is_table_i")]
     pub observation: SkillObservation,
+    /// How the skill's action is formed; the network's output alone when absent.
+    #[serde(default, skip_serializing_if = "SkillAction::is_plain")]
+    pub action: SkillAction,
 }
 
 impl TrainArmConfig {
@@ -624,19 +629,30 @@ fn open_metrics(
         .with_context(|| format!("opening {}", path.display()))
 }
 
+/// What an exported policy carries besides the network: its metadata (the step count is added
+/// at the end) and a prior, a matrix from observation to action added to the network's output
+/// ([`kumi_train::export::actor_model`]), which the environments add in training.
+struct PolicyFile {
+    metadata: std::collections::BTreeMap<String, String>,
+    prior: Option<Vec<f32>>,
+}
+
 /// The one training runner: PPO over `envs` until `config.total_steps`, with metrics.csv,
 /// progress (a bar on a terminal, a line every few iterations otherwise), checkpoints and
-/// resume; then the deterministic actor exported to `out/<name>.onnx` with `metadata` (its
-/// step count added).
+/// resume; then the deterministic actor exported to `out/<name>.onnx` as `policy` says.
 fn train<E: Environment>(
     what: &str,
     config: PpoConfig,
     envs: Vec<E>,
     args: &RunArgs,
     out: &std::path::Path,
-    mut metadata: std::collections::BTreeMap<String, String>,
+    policy: PolicyFile,
     name: &str,
 ) -> Result<PathBuf> {
+    let PolicyFile {
+        mut metadata,
+        prior,
+    } = policy;
     let metric_names = envs.first().map(|e| e.metric_names()).unwrap_or(&[]);
     crate::output::ensure_dir(out)?;
     let total = config.total_steps;
@@ -722,6 +738,7 @@ fn train<E: Environment>(
     let onnx = kumi_train::export::actor_model(
         &trainer.actor_norm(),
         &trainer.learner.net.actor.parameters(),
+        prior.as_deref(),
         &metadata,
     );
     let onnx_path = out.join(format!("{name}.onnx"));
@@ -754,6 +771,7 @@ fn train_arm(args: TrainArmArgs) -> Result<()> {
         goals: file.goals.clone(),
         load: file.load,
         observation: file.observation,
+        action: file.action,
     };
     let model = load_model("arm")?;
     let engine = training_engine(&args.run)?;
@@ -767,18 +785,22 @@ fn train_arm(args: TrainArmArgs) -> Result<()> {
                     goals: goals.clone(),
                     load: file.load,
                     observation: file.observation,
+                    action: file.action,
                     ..ArmReachConfig::default()
                 },
                 config.seed.wrapping_mul(1000).wrapping_add(i as u64),
             )
         })
         .collect::<Result<Vec<_>, _>>()?;
-    // The deterministic actor, normalisation included, with the skill's metadata.
-    let mut metadata = kumi_policies::skill::ArmSkill::new(
+    // The deterministic actor, normalisation and step follower included, with the skill's
+    // metadata.
+    let skill = kumi_policies::skill::ArmSkill::new(
         &model.modules[0],
         kumi_worlds::SimConfig::for_model(&model).control_hz,
-    )?
-    .metadata(
+    )?;
+    let prior = (!file.action.is_plain())
+        .then(|| kumi_train::arm_reach::step_prior(file.action.step_prior_gain, &skill));
+    let mut metadata = skill.metadata(
         envs[0].config().observation_dim(),
         &trained.fingerprint()?,
         0,
@@ -790,7 +812,7 @@ fn train_arm(args: TrainArmArgs) -> Result<()> {
         envs,
         &args.run,
         &args.out,
-        metadata,
+        PolicyFile { metadata, prior },
         "arm_reach",
     )?;
     Ok(())
@@ -879,7 +901,10 @@ fn train_whole_body(args: TrainBodyArgs) -> Result<()> {
         envs,
         &args.run,
         &out,
-        metadata,
+        PolicyFile {
+            metadata,
+            prior: None,
+        },
         &name,
     )?;
     Ok(())

@@ -34,7 +34,7 @@ fn random_policy(
         })
         .collect();
     norm.update(&rows.iter().map(|r| r.as_slice()).collect::<Vec<_>>());
-    let bytes = encode(&actor_model(&norm, &net.parameters(), metadata));
+    let bytes = encode(&actor_model(&norm, &net.parameters(), None, metadata));
     (net, norm, bytes)
 }
 

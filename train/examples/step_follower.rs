@@ -37,7 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     norm.mean.fill(0.0);
     norm.var.fill(1.0);
     let metadata = skill.metadata(OBSERVATION_DIM, &format!("step-follower-gain-{gain}"), 0);
-    std::fs::write(out, encode(&actor_model(&norm, &[layer], &metadata)))?;
+    std::fs::write(out, encode(&actor_model(&norm, &[layer], None, &metadata)))?;
     println!("step follower, gain {gain}: {out}");
     Ok(())
 }

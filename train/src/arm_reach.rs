@@ -36,6 +36,8 @@ pub struct ArmReachConfig {
     pub load: ToolLoad,
     /// What the policy observes beyond Table I's values (none: format 1, the shipped skill's).
     pub observation: SkillObservation,
+    /// How the policy's action is formed (the network's output alone by default).
+    pub action: SkillAction,
 }
 
 impl ArmReachConfig {
@@ -85,6 +87,52 @@ impl SkillObservation {
             )),
         }
     }
+}
+
+/// How the skill's action is formed (`[action]` of the training config).
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SkillAction {
+    /// The action is the network's output plus this gain times the observed joint step over
+    /// the largest increment ([`step_prior`]): the network learns a residual on a step
+    /// follower. 0: the network's output alone. Needs `joint_step`. The exported policy
+    /// carries the term in its graph, so the skill's contract and whoever runs it are as for
+    /// any skill of its format.
+    #[serde(default)]
+    pub step_prior_gain: f64,
+}
+
+impl SkillAction {
+    /// The network's output alone (the section left out).
+    pub fn is_plain(&self) -> bool {
+        self.step_prior_gain == 0.0
+    }
+}
+
+/// The step follower's part of the action as a matrix [[`OBSERVATION_DIM`]][[`JOINTS`]]
+/// (row-major): `gain` over each joint's largest increment, from each joint's observed step
+/// (`step1..step7`) to its action. The training environment adds observation times matrix to
+/// the network's output; the exported policy's graph does the same.
+pub fn step_prior(gain: f64, skill: &ArmSkill) -> Vec<f32> {
+    let mut matrix = vec![0.0_f32; OBSERVATION_DIM * JOINTS];
+    for j in 0..JOINTS {
+        matrix[(observation::TOOL_DIM + j) * JOINTS + j] = (gain / skill.increment_scale[j]) as f32;
+    }
+    matrix
+}
+
+/// `action` plus `observation` times `prior` ([`step_prior`]), value by value in f32.
+pub fn with_prior(
+    action: &[f32; JOINTS],
+    observation: &[f32; OBSERVATION_DIM],
+    prior: &[f32],
+) -> [f32; JOINTS] {
+    std::array::from_fn(|j| {
+        let follower: f32 = (0..OBSERVATION_DIM)
+            .map(|i| observation[i] * prior[i * JOINTS + j])
+            .sum();
+        action[j] + follower
+    })
 }
 
 /// A load on the tool during some goals (`[load]` of the training config): what the rest of a
@@ -203,6 +251,7 @@ impl Default for ArmReachConfig {
             weights: ReachWeights::default(),
             load: ToolLoad::default(),
             observation: SkillObservation::default(),
+            action: SkillAction::default(),
         }
     }
 }
@@ -339,6 +388,10 @@ pub struct ArmReach {
     observed_goal: Goal,
     targets: Vec<f64>,
     previous_action: [f32; JOINTS],
+    /// The step follower's matrix when `[action]` asks for one ([`step_prior`]).
+    prior: Option<Vec<f32>>,
+    /// The observation the next action answers (the last one returned).
+    last_observation: [f32; OBSERVATION_DIM],
     step: usize,
 }
 
@@ -350,7 +403,19 @@ impl ArmReach {
         seed: u64,
     ) -> Result<Self, EnvError> {
         config.load.validate()?;
-        config.observation.observation_dim()?;
+        let observation_dim = config.observation.observation_dim()?;
+        let gain = config.action.step_prior_gain;
+        if !(gain.is_finite() && gain >= 0.0) {
+            return Err(EnvError::Observation(format!(
+                "`step_prior_gain` must be finite and >= 0, not {gain}"
+            )));
+        }
+        if gain > 0.0 && observation_dim != OBSERVATION_DIM {
+            return Err(EnvError::Observation(
+                "`step_prior_gain` needs the joint step in the observation (`joint_step = true`)"
+                    .into(),
+            ));
+        }
         let not_arm = || EnvError::NotASingleArm(model.name.clone());
         if !model.fixed_base || model.modules.len() != 1 {
             return Err(not_arm());
@@ -370,6 +435,7 @@ impl ArmReach {
         let limits = std::array::from_fn(|j| (actuators[j].lower, actuators[j].upper));
         let sim = SimConfig::for_model(&model);
         let skill = ArmSkill::new(arm, sim.control_hz)?;
+        let prior = (gain > 0.0).then(|| step_prior(gain, &skill));
         let world = kumi_worlds::build(config.engine, model.clone(), sim)?;
         let goal = Goal {
             position_b: Default::default(),
@@ -390,6 +456,8 @@ impl ArmReach {
             observed_goal: goal,
             targets: vec![0.0; JOINTS],
             previous_action: [0.0; JOINTS],
+            prior,
+            last_observation: [0.0; OBSERVATION_DIM],
             step: 0,
         };
         env.reset();
@@ -439,7 +507,8 @@ impl ArmReach {
         };
         self.load_tool();
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
-        self.observation()
+        self.last_observation = self.observation();
+        self.last_observation
     }
 
     /// Draws the tool's load for the goal that starts now and puts it on; an anchored goal
@@ -538,11 +607,16 @@ impl ArmReach {
         self.goal
     }
 
-    /// Applies one action (7 values in [-1, 1], clipped), steps the physics one control step.
-    pub fn step(&mut self, act: &[f32; JOINTS]) -> StepOutcome {
+    /// Applies one action (7 values in [-1, 1], clipped; with a step prior, the network's
+    /// output, to which the follower's part is added first), steps the physics one control step.
+    pub fn step(&mut self, network: &[f32; JOINTS]) -> StepOutcome {
         if self.world.diverged() {
             return self.diverged_step();
         }
+        let act = &match &self.prior {
+            Some(prior) => with_prior(network, &self.last_observation, prior),
+            None => *network,
+        };
         let increments = self.skill.increments(act);
         let actuators: Vec<&Actuator> = self.actuators.iter().collect();
         self.targets = apply_increments(&self.targets, &increments, &actuators)
@@ -577,15 +651,16 @@ impl ArmReach {
             self.load_tool();
         }
         self.observed_goal = self.config.goal_noise.apply(&self.goal, &mut self.rng);
+        self.last_observation = observation::build(
+            &q,
+            &qd,
+            &targets,
+            &self.observed_goal,
+            &|q| self.kinematics.tool_pose_b(q),
+            self.kinematics.limits_rad(),
+        );
         StepOutcome {
-            observation: observation::build(
-                &q,
-                &qd,
-                &targets,
-                &self.observed_goal,
-                &|q| self.kinematics.tool_pose_b(q),
-                self.kinematics.limits_rad(),
-            ),
+            observation: self.last_observation,
             reward: terms.total(),
             terms,
             truncated: self.step >= self.config.episode_steps,

@@ -77,10 +77,14 @@ fn node(
     }
 }
 
-/// The actor as an ONNX model. `metadata` becomes `metadata_props` (sorted by key).
+/// The actor as an ONNX model. `prior`, when given, is a matrix [observation][action]
+/// (row-major) whose product with the raw observation is added to the network's output (a
+/// skill's step follower, [`crate::arm_reach::step_prior`]). `metadata` becomes
+/// `metadata_props` (sorted by key).
 pub fn actor_model(
     norm: &RunningNorm,
     layers: &[DenseParameters],
+    prior: Option<&[f32]>,
     metadata: &std::collections::BTreeMap<String, String>,
 ) -> ModelProto {
     let obs_dim = norm.mean.len();
@@ -115,10 +119,10 @@ pub fn actor_model(
         ));
         initializer.push(tensor(&b, &[layer.outputs as i64], layer.bias.clone()));
         let last = k + 1 == layers.len();
-        let linear = if last {
-            OUTPUT.to_string()
-        } else {
-            format!("z{k}")
+        let linear = match (last, prior) {
+            (true, None) => OUTPUT.to_string(),
+            (true, Some(_)) => "network".to_string(),
+            (false, _) => format!("z{k}"),
         };
         let trans_b = AttributeProto {
             name: "transB".into(),
@@ -152,6 +156,32 @@ pub fn actor_model(
         }
     }
     let action_dim = layers.last().map_or(0, |l| l.outputs);
+    if let Some(prior) = prior {
+        assert_eq!(
+            prior.len(),
+            obs_dim * action_dim,
+            "the prior is [observation][action]"
+        );
+        initializer.push(tensor(
+            "prior",
+            &[obs_dim as i64, action_dim as i64],
+            prior.to_vec(),
+        ));
+        nodes.push(node(
+            "MatMul",
+            "follower",
+            &[INPUT, "prior"],
+            "followed",
+            vec![],
+        ));
+        nodes.push(node(
+            "Add",
+            "residual",
+            &["network", "followed"],
+            OUTPUT,
+            vec![],
+        ));
+    }
     let props: Vec<StringStringEntryProto> = metadata
         .iter()
         .map(|(k, v)| StringStringEntryProto {

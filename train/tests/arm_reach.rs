@@ -528,3 +528,85 @@ fn a_held_tool_does_not_follow_its_targets() {
         "lead free {free_lead}, held {held_lead} rad"
     );
 }
+
+#[test]
+fn a_step_prior_adds_the_step_follower_to_the_networks_action() {
+    use kumi_policies::skill::ArmSkill;
+    use kumi_train::arm_reach::{step_prior, with_prior, SkillAction, SkillObservation};
+    let arm = model("arm");
+    let plain_config = ArmReachConfig {
+        observation: SkillObservation {
+            targets_lead: true,
+            tool_error: true,
+            joint_step: true,
+        },
+        ..ArmReachConfig::default()
+    };
+    let residual_config = ArmReachConfig {
+        action: SkillAction {
+            step_prior_gain: 0.3,
+        },
+        ..plain_config.clone()
+    };
+    let mut plain = ArmReach::new(arm.clone(), plain_config.clone(), 4).unwrap();
+    let mut residual = ArmReach::new(arm.clone(), residual_config, 4).unwrap();
+    let prior = step_prior(0.3, &ArmSkill::new(&arm.modules[0], 30.0).unwrap());
+    let mut obs = plain.reset();
+    assert_eq!(residual.reset(), obs);
+    // The network's output plus the follower's part: the same arm, bit for bit.
+    for k in 0..60 {
+        let network = [
+            0.1 * (k as f32 * 0.3).sin(),
+            -0.05,
+            0.0,
+            0.02,
+            0.0,
+            -0.1,
+            0.05,
+        ];
+        let p = plain.step(&with_prior(&network, &obs, &prior));
+        let r = residual.step(&network);
+        assert_eq!(p.observation, r.observation, "step {k}");
+        obs = p.observation;
+    }
+    // With a silent network the follower alone closes on the goal.
+    let mut follower = ArmReach::new(
+        arm.clone(),
+        ArmReachConfig {
+            action: SkillAction {
+                step_prior_gain: 0.3,
+            },
+            ..plain_config.clone()
+        },
+        9,
+    )
+    .unwrap();
+    follower.reset();
+    let before = follower.step(&[0.0; 7]).position_error;
+    let mut after = before;
+    for _ in 0..100 {
+        after = follower.step(&[0.0; 7]).position_error;
+    }
+    assert!(
+        after < 0.3 * before && after < 0.05,
+        "{before} m -> {after} m"
+    );
+    // A prior needs the step in the observation, and a finite, non-negative gain.
+    for (joint_step, gain) in [(false, 0.3), (true, -0.1), (true, f64::NAN)] {
+        let config = ArmReachConfig {
+            observation: SkillObservation {
+                joint_step,
+                ..plain_config.observation
+            },
+            action: SkillAction {
+                step_prior_gain: gain,
+            },
+            ..plain_config.clone()
+        };
+        let err = ArmReach::new(arm.clone(), config, 1)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains("step_prior_gain"), "{err}");
+    }
+}

@@ -38,7 +38,12 @@ fn onnx_actor_matches_the_training_network_to_1e_5() {
     ]
     .into_iter()
     .collect();
-    let bytes = encode(&actor_model(&norm, &net.actor.parameters(), &metadata));
+    let bytes = encode(&actor_model(
+        &norm,
+        &net.actor.parameters(),
+        None,
+        &metadata,
+    ));
 
     // The model declares what the format promises, metadata sorted by key.
     let decoded = tract_onnx::pb::ModelProto::decode(bytes.as_slice()).unwrap();
@@ -102,7 +107,12 @@ fn restamping_replaces_one_value_keeps_the_first_and_leaves_the_graph() {
     ]
     .into_iter()
     .collect();
-    let bytes = encode(&actor_model(&norm, &net.actor.parameters(), &metadata));
+    let bytes = encode(&actor_model(
+        &norm,
+        &net.actor.parameters(),
+        None,
+        &metadata,
+    ));
     let props = |b: &[u8]| {
         let m = tract_onnx::pb::ModelProto::decode(b).unwrap();
         let graph = m.graph.unwrap().encode_to_vec();
@@ -133,4 +143,56 @@ fn restamping_replaces_one_value_keeps_the_first_and_leaves_the_graph() {
         restamp(&bytes, "no.such.key", "x"),
         Err(kumi_runtime::MissingKey("no.such.key".into()))
     );
+}
+
+#[test]
+fn a_prior_adds_the_raw_observation_times_its_matrix_to_the_network() {
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let net = ActorCritic::<f32>::new(OBS, ACT, &[16], -0.5, &mut rng);
+    let mut norm = RunningNorm::new(OBS);
+    let seen = random_rows(&mut rng, 100);
+    norm.update(&seen.iter().map(|r| r.as_slice()).collect::<Vec<_>>());
+    let prior: Vec<f32> = (0..OBS * ACT)
+        .map(|_| rng.random_range(-2.0..2.0))
+        .collect();
+    let metadata = Default::default();
+    let bytes = encode(&actor_model(
+        &norm,
+        &net.actor.parameters(),
+        Some(&prior),
+        &metadata,
+    ));
+    let batch = 8;
+    let model = tract_onnx::onnx()
+        .model_for_read(&mut bytes.as_slice())
+        .unwrap()
+        .with_input_fact(0, f32::fact([batch, OBS]).into())
+        .unwrap()
+        .into_optimized()
+        .unwrap()
+        .into_runnable()
+        .unwrap();
+    let rows = random_rows(&mut rng, batch);
+    let flat: Vec<f32> = rows.iter().flatten().copied().collect();
+    let input = tract_ndarray::Array2::from_shape_vec((batch, OBS), flat).unwrap();
+    let outputs = model.run(tvec!(Tensor::from(input).into())).unwrap();
+    let onnx: Vec<f32> = outputs[0]
+        .to_plain_array_view::<f32>()
+        .unwrap()
+        .iter()
+        .copied()
+        .collect();
+    let normalized: Vec<f32> = rows.iter().flat_map(|r| norm.apply(r)).collect();
+    let network = net.mean(&normalized);
+    for (r, row) in rows.iter().enumerate() {
+        for a in 0..ACT {
+            let followed: f32 = (0..OBS).map(|i| row[i] * prior[i * ACT + a]).sum();
+            let expected = network[r * ACT + a] + followed;
+            let found = onnx[r * ACT + a];
+            assert!(
+                (found - expected).abs() <= 1e-4,
+                "row {r}, action {a}: {found} against {expected}"
+            );
+        }
+    }
 }
