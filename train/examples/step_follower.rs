@@ -8,8 +8,9 @@
 //! `cargo run --release -p kumi-train --example step_follower -- GAIN OUT.onnx`
 
 use kumi_model::{assemble, load_morphology, ModuleLibrary};
-use kumi_policies::observation::{JOINTS, OBSERVATION_DIM, TOOL_DIM};
+use kumi_policies::observation::{JOINTS, OBSERVATION_DIM};
 use kumi_policies::skill::ArmSkill;
+use kumi_train::arm_reach::step_prior;
 use kumi_train::export::{actor_model, encode};
 use kumi_train::nn::mlp::DenseParameters;
 use kumi_train::ppo::normalizer::RunningNorm;
@@ -22,22 +23,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let library = ModuleLibrary::shipped();
     let model = assemble(&load_morphology("arm", &library)?, &library);
     let skill = ArmSkill::new(&model.modules[0], 30.0)?;
-    let mut weight = vec![0.0_f32; JOINTS * OBSERVATION_DIM];
-    for j in 0..JOINTS {
-        weight[j * OBSERVATION_DIM + TOOL_DIM + j] = (gain / skill.increment_scale[j]) as f32;
-    }
+    // A network that outputs zeros, and the follower as the prior training's `[action]
+    // step_prior_gain` adds (kumi_train::arm_reach::step_prior).
     let layer = DenseParameters {
-        weight,
+        weight: vec![0.0; JOINTS * OBSERVATION_DIM],
         bias: vec![0.0; JOINTS],
         inputs: OBSERVATION_DIM,
         outputs: JOINTS,
     };
+    let prior = step_prior(gain, &skill);
     // The identity normaliser: mean 0, variance 1.
     let mut norm = RunningNorm::new(OBSERVATION_DIM);
     norm.mean.fill(0.0);
     norm.var.fill(1.0);
     let metadata = skill.metadata(OBSERVATION_DIM, &format!("step-follower-gain-{gain}"), 0);
-    std::fs::write(out, encode(&actor_model(&norm, &[layer], None, &metadata)))?;
+    std::fs::write(
+        out,
+        encode(&actor_model(&norm, &[layer], Some(&prior), &metadata)),
+    )?;
     println!("step follower, gain {gain}: {out}");
     Ok(())
 }
