@@ -17,6 +17,28 @@ fn random_rows(rng: &mut ChaCha8Rng, n: usize) -> Vec<Vec<f32>> {
         .collect()
 }
 
+/// The model's outputs [rows, ACT] for `rows`, run in tract (pure Rust).
+fn run_in_tract(bytes: &[u8], rows: &[Vec<f32>]) -> Vec<f32> {
+    let model = tract_onnx::onnx()
+        .model_for_read(&mut &bytes[..])
+        .unwrap()
+        .with_input_fact(0, f32::fact([rows.len(), OBS]).into())
+        .unwrap()
+        .into_optimized()
+        .unwrap()
+        .into_runnable()
+        .unwrap();
+    let flat: Vec<f32> = rows.iter().flatten().copied().collect();
+    let input = tract_ndarray::Array2::from_shape_vec((rows.len(), OBS), flat).unwrap();
+    let outputs = model.run(tvec!(Tensor::from(input).into())).unwrap();
+    outputs[0]
+        .to_plain_array_view::<f32>()
+        .unwrap()
+        .iter()
+        .copied()
+        .collect()
+}
+
 #[test]
 fn onnx_actor_matches_the_training_network_to_1e_5() {
     let mut rng = ChaCha8Rng::seed_from_u64(11);
@@ -62,25 +84,8 @@ fn onnx_actor_matches_the_training_network_to_1e_5() {
 
     // Run it in tract (pure Rust) on a batch and compare with the training forward pass.
     let batch = 32;
-    let model = tract_onnx::onnx()
-        .model_for_read(&mut bytes.as_slice())
-        .unwrap()
-        .with_input_fact(0, f32::fact([batch, OBS]).into())
-        .unwrap()
-        .into_optimized()
-        .unwrap()
-        .into_runnable()
-        .unwrap();
     let rows = random_rows(&mut rng, batch);
-    let flat: Vec<f32> = rows.iter().flatten().copied().collect();
-    let input = tract_ndarray::Array2::from_shape_vec((batch, OBS), flat).unwrap();
-    let outputs = model.run(tvec!(Tensor::from(input).into())).unwrap();
-    let onnx: Vec<f32> = outputs[0]
-        .to_plain_array_view::<f32>()
-        .unwrap()
-        .iter()
-        .copied()
-        .collect();
+    let onnx = run_in_tract(&bytes, &rows);
 
     let normalized: Vec<f32> = rows.iter().flat_map(|r| norm.apply(r)).collect();
     let expected = net.mean(&normalized);
@@ -163,25 +168,8 @@ fn a_prior_adds_the_raw_observation_times_its_matrix_to_the_network() {
         &metadata,
     ));
     let batch = 8;
-    let model = tract_onnx::onnx()
-        .model_for_read(&mut bytes.as_slice())
-        .unwrap()
-        .with_input_fact(0, f32::fact([batch, OBS]).into())
-        .unwrap()
-        .into_optimized()
-        .unwrap()
-        .into_runnable()
-        .unwrap();
     let rows = random_rows(&mut rng, batch);
-    let flat: Vec<f32> = rows.iter().flatten().copied().collect();
-    let input = tract_ndarray::Array2::from_shape_vec((batch, OBS), flat).unwrap();
-    let outputs = model.run(tvec!(Tensor::from(input).into())).unwrap();
-    let onnx: Vec<f32> = outputs[0]
-        .to_plain_array_view::<f32>()
-        .unwrap()
-        .iter()
-        .copied()
-        .collect();
+    let onnx = run_in_tract(&bytes, &rows);
     let normalized: Vec<f32> = rows.iter().flat_map(|r| norm.apply(r)).collect();
     let network = net.mean(&normalized);
     for (r, row) in rows.iter().enumerate() {
